@@ -1,0 +1,106 @@
+"""Writing results: multi-channel EXR (OpenEXR), PNG and JSON, all atomically.
+
+Every writer writes to a temporary file in the target folder and renames it
+into place, so a failure never leaves a half-written output.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from .errors import MRTError
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike):
+    """Yield a temporary path beside ``path``; rename it to ``path`` on success."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def write_exr(path: str | os.PathLike, channels: dict[str, np.ndarray]) -> None:
+    """Write named (height, width) channels into one EXR file.
+
+    Float channels are stored as 32-bit float, integer channels as 32-bit
+    unsigned int (ids keep every bit).
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> p = os.path.join(tempfile.mkdtemp(), "a.exr")
+    >>> write_exr(p, {"R": np.zeros((2, 2)), "id": np.ones((2, 2), dtype=np.uint32)})
+    >>> os.path.exists(p)
+    True
+    """
+    import OpenEXR
+
+    data = {}
+    for name, arr in channels.items():
+        arr = np.asarray(arr)
+        if arr.ndim != 2:
+            raise MRTError(f"EXR channel {name!r} must be 2-D, got shape {arr.shape}")
+        if np.issubdtype(arr.dtype, np.integer) or arr.dtype == bool:
+            data[name] = np.ascontiguousarray(arr, dtype=np.uint32)
+        else:
+            data[name] = np.ascontiguousarray(arr, dtype=np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as tmp:
+        with OpenEXR.File(header, data) as f:
+            f.write(tmp)
+
+
+def read_exr(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read every channel of an EXR file into a dict of (height, width) arrays."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        return {name: np.array(ch.pixels) for name, ch in f.channels().items()}
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB in [0, 1] to 8-bit sRGB."""
+    x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64)), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255.0).astype(np.uint8)
+
+
+def write_png(path: str | os.PathLike, rgb_linear: np.ndarray) -> None:
+    """Write a linear (height, width, 3) image as an sRGB PNG."""
+    from matplotlib.image import imsave
+
+    with atomic_path(path) as tmp:
+        imsave(tmp, srgb_encode(rgb_linear), format="png")
+
+
+def write_error_png(path: str | os.PathLike, errors: np.ndarray,
+                    floor: float = 1e-4, cmap: str = "inferno") -> None:
+    """Write an error map with a log colour scale from ``floor`` to 1."""
+    from matplotlib.image import imsave
+
+    logs = np.log10(np.clip(np.asarray(errors, dtype=np.float64), floor, 1.0))
+    with atomic_path(path) as tmp:
+        imsave(tmp, logs, vmin=np.log10(floor), vmax=0.0, cmap=cmap, format="png")
+
+
+def write_json(path: str | os.PathLike, obj) -> None:
+    """Write ``obj`` as indented JSON."""
+    text = json.dumps(obj, indent=2, sort_keys=False, allow_nan=True)
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(text + "\n")

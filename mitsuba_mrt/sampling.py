@@ -1,0 +1,113 @@
+"""Stage 1: which pixels are traced (the report's regular grid).
+
+The report traces every (column, row) pair of a regular grid that includes
+the image borders: ``n = floor(f * W * H)`` pixels are asked for,
+``a = floor(sqrt(n))`` columns at ``linspace(0, W - 1, a)`` (truncated to
+int) and ``b = ceil(n / a)`` rows at ``linspace(0, H - 1, b)``.  The report
+used square images only; here ``a = floor(sqrt(n * W / H))``, which is the
+same for square images and keeps the grid square-ish for others (so that
+``f = 1`` traces every pixel of any image).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .errors import MRTError
+
+
+def check_fraction(name: str, value: float) -> float:
+    """Return ``value`` as a float if it lies in (0, 1], else raise MRTError."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise MRTError(f"{name} must be a number in (0, 1], got {value!r}") from None
+    if not (0.0 < value <= 1.0):  # also rejects NaN
+        raise MRTError(f"{name} must be in (0, 1], got {value}")
+    return value
+
+
+@dataclass(frozen=True)
+class SamplePattern:
+    """The traced pixels: every pair of ``rows`` x ``cols``.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    rows, cols : ndarray of int64
+        Sorted, unique pixel rows (0 = top) and columns of the grid.
+    """
+
+    width: int
+    height: int
+    rows: np.ndarray
+    cols: np.ndarray
+
+    @property
+    def grid_shape(self) -> tuple[int, int]:
+        """(number of grid rows, number of grid columns)."""
+        return len(self.rows), len(self.cols)
+
+    @property
+    def count(self) -> int:
+        """Number of traced pixels."""
+        return len(self.rows) * len(self.cols)
+
+    @cached_property
+    def pixel_xy(self) -> np.ndarray:
+        """(count, 2) int array of (column, row), rows outer, columns inner."""
+        cc, rr = np.meshgrid(self.cols, self.rows)
+        return np.stack([cc.ravel(), rr.ravel()], axis=1)
+
+    @cached_property
+    def mask(self) -> np.ndarray:
+        """(height, width) bool image, True at traced pixels."""
+        m = np.zeros((self.height, self.width), dtype=bool)
+        m[np.ix_(self.rows, self.cols)] = True
+        return m
+
+    def to_image(self, grid_values: np.ndarray, fill=0) -> np.ndarray:
+        """Scatter per-sample values (count, ...) into a full image."""
+        grid_values = np.asarray(grid_values)
+        out = np.full((self.height, self.width) + grid_values.shape[1:], fill,
+                      dtype=grid_values.dtype)
+        out[np.ix_(self.rows, self.cols)] = grid_values.reshape(
+            self.grid_shape + grid_values.shape[1:])
+        return out
+
+
+def grid_pattern(width: int, height: int, sample_fraction: float) -> SamplePattern:
+    """The report's grid of traced pixels.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size in pixels (each >= 1).
+    sample_fraction : float
+        Fraction of the pixels to trace, in (0, 1].
+
+    Returns
+    -------
+    SamplePattern
+
+    Examples
+    --------
+    >>> p = grid_pattern(200, 200, 0.1)
+    >>> p.grid_shape, p.count
+    ((64, 63), 4032)
+    """
+    sample_fraction = check_fraction("sample_fraction", sample_fraction)
+    width, height = int(width), int(height)
+    if width < 1 or height < 1:
+        raise MRTError(f"image size must be at least 1 x 1, got {width} x {height}")
+    n = max(1, math.floor(sample_fraction * width * height))
+    a = min(max(1, math.isqrt(n) if width == height else math.floor(math.sqrt(n * width / height))), width)
+    b = min(math.ceil(n / a), height)
+    cols = np.unique(np.linspace(0, width - 1, a).astype(np.int64))
+    rows = np.unique(np.linspace(0, height - 1, b).astype(np.int64))
+    return SamplePattern(width, height, rows, cols)
