@@ -1,0 +1,79 @@
+"""mitsuba-mrt: the modified ray-tracer (MRT) on Mitsuba 3.
+
+Trace a grid of pixels with any Mitsuba integrator, reconstruct the rest
+from scene knowledge: which shape each pixel sees and which lights reach it.
+
+Importing the package registers the integrator plugins ``mrt`` and
+``matte`` for the active Mitsuba variant, and again whenever the variant
+changes.  :func:`activate` chooses a variant (LLVM when usable) first.
+
+The reconstruction stages are plain numpy modules: ``sampling``, ``ids``,
+``edges``, ``interpolate`` (kernel in ``rbf``), ``compose`` and
+``metrics``; the Mitsuba-specific code is in ``trace``, ``plugins``,
+``render`` and ``variants``.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from .errors import MRTError
+from .pipeline import MRTParams, Reconstruction, reconstruct
+from .sampling import SamplePattern, grid_pattern
+
+__version__ = "0.1.0"
+
+__all__ = ["MRTError", "MRTParams", "Reconstruction", "SamplePattern", "activate",
+           "grid_pattern", "load_scene", "reconstruct", "register", "render",
+           "render_reference"]
+
+
+def register() -> None:
+    """Register the ``mrt`` and ``matte`` plugins for Mitsuba's active variant."""
+    import mitsuba as mi
+
+    if mi.variant() is None:
+        raise MRTError("no Mitsuba variant is active: call mi.set_variant(...) "
+                       "or mitsuba_mrt.activate() first")
+    from . import plugins
+
+    if plugins.VARIANT != mi.variant():
+        plugins = importlib.reload(plugins)
+    plugins.register_classes()
+
+
+def activate(variant: str = "auto") -> str:
+    """Pick a variant (``auto``: LLVM if libLLVM >= 17, else scalar), set it, register."""
+    from .variants import activate as _activate
+
+    return _activate(variant)
+
+
+def __getattr__(name):
+    # The Mitsuba-facing API is imported on first use, so that the numpy
+    # stages work without choosing a variant.
+    if name in ("render", "render_reference", "load_scene", "MRTResult"):
+        from . import api as _api
+
+        return getattr(_api, name)
+    raise AttributeError(f"module 'mitsuba_mrt' has no attribute {name!r}")
+
+
+def _on_variant_change(*_args) -> None:
+    try:
+        register()
+    except MRTError:
+        pass
+
+
+def _install_variant_hook() -> None:
+    try:
+        import mitsuba as mi
+    except ImportError:  # pragma: no cover - mitsuba is a dependency
+        return
+    mi.detail.add_variant_callback(_on_variant_change)
+    if mi.variant() is not None:
+        register()
+
+
+_install_variant_hook()

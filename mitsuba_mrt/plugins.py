@@ -1,0 +1,212 @@
+"""The Mitsuba plugins ``matte`` and ``mrt``, and their registration."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .errors import MRTError
+from .pipeline import MRTParams
+
+#: The variant whose classes this module defines (it is reloaded on a switch).
+VARIANT = mi.variant()
+
+
+def _jit() -> bool:
+    return dr.is_jit_v(mi.Float)
+
+
+def _not(mask):
+    return ~mask if _jit() else not mask
+
+
+class MatteIntegrator(mi.SamplingIntegrator):
+    r"""Deterministic point-light shading, the report's underlying ray-tracer.
+
+    At the first hit, every point and spot light is evaluated with its own
+    shadow ray: ``L = sum_lights f(wi, wo) cos(theta) I / d^2``.  With a
+    ``diffuse`` BSDF of reflectance ``rho`` and a point light of intensity
+    ``pi k`` this is the report's ``rho * k * max(0, n.l) / d^2``.  No
+    random numbers are used for diffuse surfaces, so 1 spp is noise-free.
+    Perfect mirrors (``conductor``, any purely specular BSDF) are followed
+    up to ``max_depth`` bounces.  Area and environment emitters neither
+    light the scene nor appear in the image.
+
+    .. pluginparameters::
+
+     * - max_depth
+       - |int|
+       - Most specular (mirror) bounces followed before shading (Default: 4).
+    """
+
+    def __init__(self, props=mi.Properties()):
+        super().__init__(props)
+        self.max_depth = int(props.get("max_depth", 4))  # mirror bounces followed
+        if self.max_depth < 0:
+            raise MRTError(f"matte: max_depth must be >= 0, got {self.max_depth}")
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        lights = [e for e in scene.emitters()
+                  if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition)]
+        ctx = mi.BSDFContext()
+        ray = mi.Ray3f(ray)
+        active = mi.Bool(active)
+        result = mi.Spectrum(0.0)
+        throughput = mi.Spectrum(1.0)
+        first_hit = mi.Bool(False)
+        for depth in range(self.max_depth + 1):
+            si = scene.ray_intersect(ray, active)
+            valid = active & si.is_valid()
+            if depth == 0:
+                first_hit = valid
+            if not (_jit() or valid):
+                break
+            bsdf = si.bsdf(ray)
+            flags = bsdf.flags()
+            mirror = valid & mi.has_flag(flags, mi.BSDFFlags.Delta) \
+                & _not(mi.has_flag(flags, mi.BSDFFlags.Smooth))
+            shade = valid & _not(mirror)
+            for light in lights:
+                ds, intensity = light.sample_direction(si, mi.Point2f(0.5, 0.5), shade)
+                f = bsdf.eval(ctx, si, si.to_local(ds.d), shade)
+                lit = shade & _not(scene.ray_test(si.spawn_ray_to(ds.p), shade))
+                result += dr.select(lit, throughput * f * intensity, 0.0)
+            if depth == self.max_depth or not (_jit() or mirror):
+                break
+            bs, weight = bsdf.sample(ctx, si, sampler.next_1d(mirror),
+                                     sampler.next_2d(mirror), mirror)
+            throughput = dr.select(mirror, throughput * weight, 0.0)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            active = mirror & (bs.pdf > 0.0)
+        return result, first_hit, []
+
+    def aov_names(self):
+        return []
+
+    def to_string(self):
+        return f"MatteIntegrator[max_depth={self.max_depth}]"
+
+
+class MRTIntegrator(mi.SamplingIntegrator):
+    r"""The modified ray-tracer: trace a grid of pixels, reconstruct the rest.
+
+    Wraps a nested sampling integrator (``matte``, ``direct``, ``path``, ...)
+    that renders only the grid-sampled pixels; the other pixels are
+    reconstructed per region of equal id (hit shape and visible lights) by
+    the report's edge finder and linear-RBF interpolator.  ``mi.render``
+    returns R, G, B followed by the AOVs ``id`` (the report's id: shape +
+    0.5 per blocked light, under the paper rule), ``shape_index`` (0 =
+    background, else 1 + position in the shapes sorted by ``id``), ``visible_lights``
+    (bit k = point/spot light k unoccluded) and ``traced`` (1 at traced
+    pixels).  Untraced pixels carry their region's ids.
+
+    .. pluginparameters::
+
+     * - sample_fraction
+       - |float|
+       - Fraction of the pixels traced, in (0, 1] (Default: 0.1).
+     * - filter_sigma
+       - |float|
+       - Sigma in pixels of the Gaussian id smoothing (Default: 1).
+     * - filter_cutoff
+       - |float|
+       - Normalised cutoff of the id smoothing (Default: 0.05).
+     * - max_inpoints
+       - |int|
+       - Most RBF centres per id (Default: 2000).
+     * - num_cappoints
+       - |int|
+       - Brightest and darkest capstone samples per id, each (Default: 10).
+     * - id_rule
+       - |string|
+       - ``paper`` (shape + 0.5 per blocked light) or ``exact`` (Default: paper).
+     * - rbf_degree
+       - |int|
+       - Polynomial degree added to the RBF: -1 (report), 0 or 1 (Default: -1).
+     * - aovs
+       - |bool|
+       - Append the id AOV channels to the output (Default: true).
+     * - (Nested plugin)
+       - |integrator|
+       - The integrator that traces the sampled pixels (Default: ``path``).
+    """
+
+    AOV_NAMES = ("id", "shape_index", "visible_lights", "traced")
+
+    def __init__(self, props=mi.Properties()):
+        super().__init__(props)
+        nested = [props[name] for name in props.keys()
+                  if isinstance(props[name], mi.Integrator)]
+        if len(nested) > 1:
+            raise MRTError("mrt: expected at most one nested integrator")
+        # The integrator that traces the grid-sampled pixels.
+        self.nested = nested[0] if nested else mi.load_dict({"type": "path"})
+        # Reconstruction parameters, validated once here.
+        self.params = MRTParams(
+            sample_fraction=float(props.get("sample_fraction", 0.1)),
+            filter_sigma=float(props.get("filter_sigma", 1.0)),
+            filter_cutoff=float(props.get("filter_cutoff", 0.05)),
+            max_inpoints=int(props.get("max_inpoints", 2000)),
+            num_cappoints=int(props.get("num_cappoints", 10)),
+            id_rule=str(props.get("id_rule", "paper")),
+            rbf_degree=int(props.get("rbf_degree", -1)))
+        # Whether mi.render returns the id AOVs after R, G, B.
+        self.output_aovs = bool(props.get("aovs", True))
+        # The last MRTResult, for callers who want timings and statistics.
+        self.last_result = None
+
+    def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
+        from .api import render
+
+        if not develop:
+            raise MRTError("mrt: only develop=True is supported")
+        result = render(scene, self.nested, sensor=sensor, spp=int(spp) or None,
+                        seed=int(seed), params=self.params)
+        self.last_result = result
+        channels = [result.image]
+        if self.output_aovs:
+            aovs = aov_images(result)
+            channels += [aovs[name][..., None] for name in self.AOV_NAMES]
+        return mi.TensorXf(np.concatenate(channels, axis=-1).astype(np.float32))
+
+    def sample(self, scene, sampler, ray, medium=None, active=True):
+        # Per-ray queries (e.g. from another integrator) get the nested result.
+        return self.nested.sample(scene, sampler, ray, medium, active)
+
+    def aov_names(self):
+        return list(self.AOV_NAMES) if self.output_aovs else []
+
+    def to_string(self):
+        fields = ", ".join(f"{k}={v}" for k, v in self.params.as_dict().items())
+        return f"MRTIntegrator[{fields},\n  nested={self.nested}]"
+
+
+def aov_images(result) -> dict[str, np.ndarray]:
+    """Full-resolution id AOVs of an MRTResult, as float32-exact arrays.
+
+    ``id`` is the report's float id under the paper rule, and the rank of
+    the region's id among the image's ids under the exact rule.
+    """
+    from .compose import region_values
+    from .ids import encode_ids
+
+    trace, ids = result.trace, result.ids
+    sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
+                            result.params.id_rule)
+    if result.params.id_rule == "paper":
+        id_image = ids / 2.0
+    else:
+        id_image = np.searchsorted(np.unique(ids), ids).astype(np.float64)
+    return {
+        "id": id_image,
+        "shape_index": region_values(ids, sample_ids, trace.shape_index, "first", 0),
+        "visible_lights": region_values(ids, sample_ids, trace.visible_lights, "first", 0),
+        "traced": result.traced_mask.astype(np.float64),
+    }
+
+
+def register_classes() -> None:
+    """Register this module's ``matte`` and ``mrt`` classes with Mitsuba."""
+    mi.register_integrator("matte", lambda props: MatteIntegrator(props))
+    mi.register_integrator("mrt", lambda props: MRTIntegrator(props))

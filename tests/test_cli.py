@@ -1,0 +1,99 @@
+"""The command line, run as a user would: in a subprocess."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT, SCENES
+
+
+def run_cli(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "mitsuba_mrt", *map(str, args)],
+                          cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_render_writes_every_output(tmp_path):
+    proc = run_cli("render", SCENES / "paper_fraction.xml", "-o", tmp_path, "-D", "res=48",
+                   "--sample-fraction", "0.2")
+    assert proc.returncode == 0, proc.stderr
+    assert len(proc.stdout.strip().splitlines()) == 1 and "error" in proc.stdout
+    names = {p.name for p in tmp_path.iterdir()}
+    assert names == {"paper_fraction_mrt.exr", "paper_fraction_mrt.png", "paper_fraction_ref.exr",
+                     "paper_fraction_ref.png", "paper_fraction_error.png", "paper_fraction.json"}
+    summary = json.loads((tmp_path / "paper_fraction.json").read_text())
+    assert summary["width"] == summary["height"] == 48  # -D res=48 took effect
+    assert summary["sample_fraction"] == 0.2
+    assert set(summary["timings"]) == {"trace", "edges", "interpolate", "total"}
+    for key in ("variant", "traced_pixels", "reference_time_s", "error", "psnr_db", "params"):
+        assert key in summary
+    assert 0.0 <= summary["error"] < 0.05
+
+    from mitsuba_mrt.imageio import read_exr
+
+    channels = read_exr(tmp_path / "paper_fraction_mrt.exr")
+    assert {"R", "G", "B", "id", "shape_index", "visible_lights", "traced"} <= set(channels)
+    assert channels["traced"].sum() == summary["traced_pixels"]
+    assert channels["R"].shape == (48, 48)
+
+
+def test_json_flag_and_no_reference(tmp_path):
+    proc = run_cli("render", SCENES / "paper_objects_2.xml", "-o", tmp_path, "-D", "res=32",
+                   "--no-reference", "--json", "--id-rule", "exact")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["error"] is None and summary["params"]["id_rule"] == "exact"
+    assert not (tmp_path / "paper_objects_2_ref.exr").exists()
+
+
+BAD = [
+    (["render", "missing.xml"], "scene file not found"),
+    (["render", SCENES / "paper_fraction.xml", "--sample-fraction", "0"], "sample_fraction"),
+    (["render", SCENES / "paper_fraction.xml", "--sample-fraction", "1.5"], "sample_fraction"),
+    (["render", SCENES / "paper_fraction.xml", "--filter-sigma", "-1"], "filter_sigma"),
+    (["render", SCENES / "paper_fraction.xml", "--variant", "llvm_rgb"], "invalid choice"),
+    (["render", SCENES / "paper_fraction.xml", "-D", "res"], "name=value"),
+    (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),
+    (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "--spp"),
+]
+
+
+@pytest.mark.parametrize("args,message", BAD)
+def test_bad_input_is_one_line_and_nonzero(tmp_path, args, message):
+    proc = run_cli(*args, "-o", tmp_path / "out")
+    assert proc.returncode != 0
+    assert message in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_malformed_xml(tmp_path):
+    bad = tmp_path / "bad.xml"
+    bad.write_text('<scene version="3.0.0"><shape type="sphere"></scene>')
+    proc = run_cli("render", bad, "-o", tmp_path / "out")
+    assert proc.returncode == 2 and "malformed XML" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_inf_radiance_leaves_no_output(tmp_path):
+    text = (SCENES / "paper_fraction.xml").read_text()
+    bad = tmp_path / "inf.xml"
+    import re
+
+    bad.write_text(re.sub(r'name="intensity" value="[^"]*"', 'name="intensity" value="inf"', text))
+    proc = run_cli("render", bad, "-o", tmp_path / "out", "-D", "res=24")
+    assert proc.returncode == 2 and "NaN or Inf radiance" in proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_failed_write_leaves_no_partial_file(tmp_path):
+    from mitsuba_mrt import MRTError
+    from mitsuba_mrt.imageio import write_exr
+
+    target = tmp_path / "x.exr"
+    with pytest.raises(MRTError):
+        write_exr(target, {"R": np.zeros((2, 2)), "bad": np.zeros(3)})
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,188 @@
+"""The Mitsuba side: matte shading, the sparse trace, the mrt plugin."""
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import mitsuba_mrt
+from mitsuba_mrt import MRTError, grid_pattern
+from mitsuba_mrt.metrics import paper_error
+from conftest import small_scene_xml
+
+LIGHTS = [((2.0, 2.0, 5.0), 60.0), ((-3.0, 0.0, 4.0), 40.0)]
+
+
+def numpy_matte(o, d):
+    """The report's shading for the small scene, evaluated in numpy."""
+    def hit(o, d):
+        # sphere r=1 at origin and the plane z = -1.5; returns (t, normal, albedo)
+        b = np.dot(o, d)
+        disc = b * b - (np.dot(o, o) - 1.0)
+        best = (np.inf, None, None)
+        if disc >= 0:
+            for t in (-b - np.sqrt(disc), -b + np.sqrt(disc)):
+                if t > 1e-4:
+                    best = (t, o + t * d, np.array([0.8, 0.2, 0.2]))
+                    break
+        if abs(d[2]) > 1e-12:
+            t = (-1.5 - o[2]) / d[2]
+            if 1e-4 < t < best[0]:
+                best = (t, np.array([0.0, 0.0, 1.0]), np.array([0.5, 0.5, 0.5]))
+        t, n, albedo = best
+        if n is not None and albedo[0] == 0.8:
+            n = n / np.linalg.norm(n)
+        return t, n, albedo
+
+    t, n, albedo = hit(o, d)
+    if n is None:
+        return np.zeros(3)
+    p = o + t * d
+    energy = 0.0
+    for pos, intensity in LIGHTS:
+        to_light = np.array(pos) - p
+        dist = np.linalg.norm(to_light)
+        l = to_light / dist
+        ts, _, _ = hit(p + 1e-4 * n, l)
+        if ts < dist:
+            continue
+        energy += (intensity / np.pi) * max(0.0, float(np.dot(n, l))) / dist ** 2
+    return albedo * energy
+
+
+def test_matte_matches_the_report_formula(variant):
+    res = 32
+    scene = mi.load_string(small_scene_xml(res))
+    image = np.array(mi.render(scene))[..., :3]
+    sensor = scene.sensors()[0]
+    pixels = [(16, 16), (20, 12), (5, 5), (28, 30), (10, 22), (14, 18), (25, 8)]
+    for x, y in pixels:
+        ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f((x + 0.5) / res, (y + 0.5) / res),
+                                   mi.Point2f(0.5, 0.5))
+        o = np.array(ray.o, dtype=np.float64).reshape(-1)
+        d = np.array(ray.d, dtype=np.float64).reshape(-1)
+        expected = numpy_matte(o, d / np.linalg.norm(d))
+        assert np.allclose(image[y, x], expected, rtol=2e-4, atol=1e-6), (x, y)
+    assert image.max() > 0.1  # the scene is lit
+
+
+def test_matte_is_noise_free_at_one_spp(variant):
+    scene = mi.load_string(small_scene_xml(16))
+    a = np.array(mi.render(scene, seed=1))
+    b = np.array(mi.render(scene, seed=2))
+    assert np.array_equal(a, b)
+
+
+def counting_integrator(nested):
+    """A nested integrator that counts the lanes (rays) that reach it."""
+
+    class CountingIntegrator(mi.SamplingIntegrator):
+        def __init__(self):
+            super().__init__(mi.Properties())
+            self.rays = 0
+
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            self.rays += dr.width(ray.o.x) if dr.is_jit_v(mi.Float) else 1
+            return nested.sample(scene, sampler, ray, medium, active)
+
+    return CountingIntegrator()
+
+
+@pytest.mark.parametrize("fraction,spp,taken", [(0.1, 1, 1), (0.25, 3, 4)])
+def test_only_the_grid_pixels_are_traced(variant, fraction, spp, taken):
+    scene = mi.load_string(small_scene_xml(40))
+    counting = counting_integrator(scene.integrator())
+    result = mitsuba_mrt.render(scene, counting, spp=spp, sample_fraction=fraction)
+    expected = grid_pattern(40, 40, fraction).count
+    assert result.spp == taken  # the stratified sampler rounds 3 up to 4
+    assert counting.rays == expected * taken
+    assert result.traced_mask.sum() == expected
+
+
+def test_traced_pixels_equal_the_full_render(variant):
+    scene = mi.load_string(small_scene_xml(48))
+    result = mitsuba_mrt.render(scene, sample_fraction=0.2)
+    reference, _ = mitsuba_mrt.render_reference(scene)
+    m = result.traced_mask
+    assert np.allclose(result.image[m], reference[m], atol=1e-6)
+    assert paper_error(result.image, reference) < 0.02
+
+
+def test_ids_come_from_the_trace(variant):
+    scene = mi.load_string(small_scene_xml(32))
+    result = mitsuba_mrt.render(scene, sample_fraction=0.3, id_rule="exact")
+    trace = result.trace
+    assert set(np.unique(trace.shape_index)) == {1, 2}  # sphere, floor (no background)
+    assert trace.num_lights == 2
+    centre = np.flatnonzero((result.pattern.pixel_xy == [15, 15]).all(axis=1))
+    if len(centre):  # the sphere's front sees light 0 and light 1
+        assert trace.shape_index[centre[0]] == 1 and trace.visible_lights[centre[0]] == 0b11
+    assert np.allclose(trace.albedo[trace.shape_index == 1], [0.8, 0.2, 0.2])
+
+
+def test_mrt_plugin_from_xml(variant):
+    xml = small_scene_xml(32, integrator="""<integrator type="mrt">
+        <float name="sample_fraction" value="0.25"/><float name="filter_sigma" value="1.5"/>
+        <integrator type="matte"/></integrator>""")
+    scene = mi.load_string(xml)
+    integrator = scene.integrator()
+    assert integrator.params.sample_fraction == 0.25 and integrator.params.filter_sigma == 1.5
+    assert integrator.aov_names() == ["id", "shape_index", "visible_lights", "traced"]
+    image = np.array(mi.render(scene))
+    assert image.shape == (32, 32, 7)
+    assert image[..., 6].sum() == grid_pattern(32, 32, 0.25).count
+    assert set(np.unique(image[..., 4])) <= {0.0, 1.0, 2.0}
+    full = np.array(mi.render(scene, integrator=integrator.nested))
+    traced = image[..., 6] == 1
+    assert np.allclose(image[traced][:, :3], full[traced][:, :3], atol=1e-6)
+    # the API sees the wrapper's parameters
+    assert mitsuba_mrt.render(scene).params.filter_sigma == 1.5
+
+
+def test_mrt_plugin_rejects_bad_parameters(variant):
+    for name, value, message in [("sample_fraction", "0", "sample_fraction"),
+                                 ("filter_sigma", "-1", "filter_sigma")]:
+        xml = small_scene_xml(8, integrator=f'<integrator type="mrt"><float name="{name}" '
+                                            f'value="{value}"/></integrator>')
+        with pytest.raises(Exception, match=message):
+            mi.load_string(xml)
+
+
+def test_mrt_plugin_with_path_integrator(variant):
+    xml = small_scene_xml(24, integrator="""<integrator type="mrt">
+        <integrator type="path"><integer name="max_depth" value="3"/></integrator></integrator>""")
+    image = np.array(mi.render(mi.load_string(xml), spp=4))
+    assert np.isfinite(image).all() and image[..., :3].max() > 0
+
+
+@pytest.mark.parametrize("kind", ["no_shapes", "no_lights"])
+def test_degenerate_scenes_render_without_nan(variant, kind):
+    scene = mi.load_string(small_scene_xml(24, shapes=kind != "no_shapes",
+                                           lights=kind != "no_lights"))
+    result = mitsuba_mrt.render(scene)
+    assert np.isfinite(result.image).all()
+    assert (result.image == 0).all()
+
+
+def test_nan_radiance_is_a_clear_error(variant):
+    class NaNIntegrator(mi.SamplingIntegrator):
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            return mi.Color3f(dr.nan), mi.Bool(True), []
+
+    scene = mi.load_string(small_scene_xml(16))
+    with pytest.raises(MRTError, match="NaN or Inf radiance at 256 of 256"):
+        mitsuba_mrt.render(scene, NaNIntegrator(mi.Properties()), sample_fraction=1.0)
+
+
+def test_scalar_variant_gives_the_same_trace(variant):
+    xml = small_scene_xml(24)
+    llvm_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2)
+    try:
+        mi.set_variant("scalar_rgb")
+        scalar_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2)
+    finally:
+        mi.set_variant(variant)
+    assert np.allclose(scalar_result.trace.radiance, llvm_result.trace.radiance, atol=1e-5)
+    assert np.array_equal(scalar_result.trace.shape_index, llvm_result.trace.shape_index)
+    assert np.array_equal(scalar_result.trace.visible_lights, llvm_result.trace.visible_lights)
+    assert np.allclose(scalar_result.image, llvm_result.image, atol=1e-4)
