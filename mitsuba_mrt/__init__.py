@@ -18,12 +18,13 @@ from __future__ import annotations
 import importlib
 
 from .errors import MRTError
-from .pipeline import MRTParams, Reconstruction, reconstruct
+from . import baselines  # noqa: F401  (registers the nearest and bicubic modes)
+from .pipeline import MODES, MRTParams, Reconstruction, SparseTrace, reconstruct
 from .sampling import SamplePattern, grid_pattern
 
 __version__ = "0.1.0"
 
-__all__ = ["MRTError", "MRTParams", "Reconstruction", "SamplePattern", "activate",
+__all__ = ["MODES", "MRTError", "MRTParams", "SparseTrace", "Reconstruction", "SamplePattern", "activate",
            "grid_pattern", "load_scene", "reconstruct", "register", "render",
            "render_reference"]
 

@@ -1,10 +1,12 @@
 """The Python API: MRT and reference renders of a Mitsuba scene.
 
->>> import mitsuba as mi, mitsuba_mrt                      # doctest: +SKIP
->>> mitsuba_mrt.activate("auto")                           # doctest: +SKIP
->>> scene = mitsuba_mrt.load_scene("scenes_xml/paper_fig1.xml")  # doctest: +SKIP
->>> result = mitsuba_mrt.render(scene, sample_fraction=0.1)  # doctest: +SKIP
->>> result.image.shape, result.timings["total"]            # doctest: +SKIP
+Example::
+
+    import mitsuba_mrt
+    mitsuba_mrt.activate("auto")
+    scene = mitsuba_mrt.load_scene("scenes_xml/paper_fig1.xml", res=400)
+    result = mitsuba_mrt.render(scene, sample_fraction=0.1)
+    reference, seconds = mitsuba_mrt.render_reference(scene)
 """
 
 from __future__ import annotations
@@ -19,7 +21,6 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import MRTError
-from .ids import encode_ids
 from .pipeline import MRTParams, Reconstruction, reconstruct
 from .sampling import SamplePattern, grid_pattern
 from .trace import SparseTrace, trace_pixels
@@ -41,6 +42,9 @@ class MRTResult:
         Radiance and AOVs of the traced pixels.
     params : MRTParams
     spp : int
+        Samples per traced pixel actually taken.
+    mode : str
+        The reconstruction mode used.
     timings : dict
         Seconds: ``trace``, ``edges``, ``interpolate``, ``total``.
     stats : dict
@@ -54,6 +58,7 @@ class MRTResult:
     trace: SparseTrace
     params: MRTParams
     spp: int
+    mode: str
     timings: dict = field(default_factory=dict)
     stats: dict = field(default_factory=dict)
 
@@ -98,7 +103,7 @@ def nested_integrator(scene: mi.Scene, integrator=None):
 
 def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0,
            spp: int | None = None, seed: int = 0, params: MRTParams | None = None,
-           **param_overrides) -> MRTResult:
+           mode: str = "paper", **param_overrides) -> MRTResult:
     """Render ``scene`` with the MRT: trace the grid, reconstruct the rest.
 
     Parameters
@@ -112,6 +117,8 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         Samples per traced pixel; default: the sensor's sampler.
     seed : int
     params : MRTParams, optional
+    mode : str
+        Reconstruction mode, a key of :data:`mitsuba_mrt.pipeline.MODES`.
     **param_overrides
         Fields of :class:`MRTParams` (``sample_fraction=0.05`` ...).
     """
@@ -123,14 +130,15 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     width, height = (int(v) for v in sensor.film().crop_size())
     pattern = grid_pattern(width, height, params.sample_fraction)
     trace = trace_pixels(scene, sensor, nested, pattern.pixel_xy, spp, seed)
-    sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            params.id_rule)
-    recon: Reconstruction = reconstruct(pattern, sample_ids, trace.radiance,
-                                        trace.albedo, params)
+
+    def tracer(pixel_xy):
+        return trace_pixels(scene, sensor, nested, pixel_xy, spp, seed + 1)
+
+    recon: Reconstruction = reconstruct(pattern, trace, params, mode, tracer)
     timings = {"trace": trace.seconds, **recon.timings,
                "total": time.perf_counter() - start}
     return MRTResult(recon.image, recon.ids, recon.traced_mask, pattern, trace, params,
-                     trace.spp, timings, dict(recon.stats))
+                     trace.spp, mode, timings, dict(recon.stats))
 
 
 def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *,

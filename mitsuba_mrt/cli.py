@@ -45,6 +45,12 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
                    help="polynomial added to the linear RBF; -1 is the report's")
 
 
+def _modes() -> list[str]:
+    from . import MODES
+
+    return list(MODES)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="python -m mitsuba_mrt",
                      description="The modified ray-tracer (MRT) on Mitsuba 3.")
@@ -62,6 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-reference", action="store_true",
                    help="skip the full reference render (no error, no PSNR)")
     r.add_argument("--json", action="store_true", help="print the JSON summary")
+    r.add_argument("--mode", default="paper", metavar="MODE",
+                   help="reconstruction mode: " + ", ".join(_modes()) + " (default %(default)s)")
     _add_mrt_options(r)
     return parser
 
@@ -80,9 +88,11 @@ def _render(args) -> int:
 
     if args.spp is not None and args.spp < 1:
         raise MRTError(f"--spp must be >= 1, got {args.spp}")
+    if args.mode not in _modes():
+        raise MRTError(f"unknown mode {args.mode!r}; choose one of {', '.join(_modes())}")
     job = RenderJob(scene=args.scene, out_dir=args.output, defines=dict(args.defines),
                     params=_params(args), spp=args.spp, seed=args.seed,
-                    variant=args.variant, reference=not args.no_reference)
+                    variant=args.variant, reference=not args.no_reference, mode=args.mode)
     summary = run_render_job(job)
     print(json.dumps(summary, indent=2) if args.json else summary_line(summary))
     return 0

@@ -30,6 +30,7 @@ class RenderJob:
     seed: int = 0
     variant: str = "auto"
     reference: bool = True
+    mode: str = "paper"
 
 
 def _environment(variant: str) -> dict:
@@ -59,7 +60,7 @@ def run_render_job(job: RenderJob) -> dict:
     from .plugins import aov_images
 
     scene = load_scene(job.scene, **job.defines)
-    result = render(scene, spp=job.spp, seed=job.seed, params=job.params)
+    result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode)
     out = Path(job.out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -69,7 +70,7 @@ def run_render_job(job: RenderJob) -> dict:
     height, width = result.ids.shape
     summary = {
         "scene": os.fspath(job.scene), "variant": variant, "width": width,
-        "height": height, "spp": result.spp,
+        "height": height, "spp": result.spp, "mode": result.mode,
         "sample_fraction": result.params.sample_fraction,
         "traced_pixels": int(result.pattern.count),
         "timings": {k: result.timings[k] for k in ("trace", "edges", "interpolate", "total")},

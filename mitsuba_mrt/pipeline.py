@@ -16,7 +16,7 @@ import numpy as np
 from .compose import compose, demodulate, region_albedo
 from .edges import quadtree_fill, smooth_ids
 from .errors import MRTError
-from .ids import ID_RULES
+from .ids import ID_RULES, encode_ids
 from .interpolate import interpolate_regions
 from .sampling import SamplePattern, check_fraction
 
@@ -75,6 +75,38 @@ class MRTParams:
 
 
 @dataclass
+class SparseTrace:
+    """What the trace learnt at each traced pixel.
+
+    Attributes
+    ----------
+    radiance : ndarray, shape (n, 3)
+        Mean radiance of the pixel's samples, from the nested integrator.
+    albedo : ndarray, shape (n, 3)
+        Diffuse reflectance at the pixel-centre hit (0 on a miss or a mirror).
+    shape_index : ndarray of int64, shape (n,)
+        0 for background, else 1 + the shape's position in :func:`ordered_shapes`.
+    visible_lights : ndarray of uint32, shape (n,)
+        Bit k set when tracked light k is unoccluded from the hit point.
+    num_lights : int
+        Number of tracked lights (point and spot lights, at most 32).
+    spp : int
+        Samples per pixel actually taken (the sampler may round the request:
+        ``stratified`` takes the next square power of two).
+    seconds : float
+        Wall time of the trace, kernel compilation included.
+    """
+
+    radiance: np.ndarray
+    albedo: np.ndarray
+    shape_index: np.ndarray
+    visible_lights: np.ndarray
+    num_lights: int
+    spp: int
+    seconds: float
+
+
+@dataclass
 class Reconstruction:
     """A reconstructed image and how it was made.
 
@@ -98,39 +130,22 @@ class Reconstruction:
     stats: Counter = field(default_factory=Counter)
 
 
-def reconstruct(pattern: SamplePattern, sample_ids: np.ndarray, radiance: np.ndarray,
-                albedo: np.ndarray, params: MRTParams = MRTParams()) -> Reconstruction:
-    """Reconstruct the full image from the traced grid (report Algorithms 2 and 3).
+def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
+                      tracer=None) -> Reconstruction:
+    """The report's reconstruction (Algorithms 2 and 3), mode ``paper``.
 
     Parameters
     ----------
     pattern : SamplePattern
         The traced grid.
-    sample_ids : ndarray of int, shape (pattern.count,)
-        Region id of each traced pixel (see :func:`mitsuba_mrt.ids.encode_ids`).
-    radiance, albedo : ndarray, shape (pattern.count, 3)
-        Traced radiance and surface albedo, rows outer, columns inner.
+    trace : SparseTrace
+        Radiance and AOVs of the traced pixels, rows outer, columns inner.
     params : MRTParams
-
-    Examples
-    --------
-    >>> from mitsuba_mrt.sampling import grid_pattern
-    >>> p = grid_pattern(8, 8, 0.25)
-    >>> rad = np.ones((p.count, 3)); alb = np.full((p.count, 3), 0.5)
-    >>> out = reconstruct(p, np.ones(p.count, int), rad, alb)
-    >>> float(out.image.min()), float(out.image.max())
-    (1.0, 1.0)
+    tracer : callable, optional
+        Unused: this mode traces nothing beyond the grid.
     """
-    sample_ids = np.asarray(sample_ids, dtype=np.int64)
-    radiance = np.asarray(radiance, dtype=np.float64)
-    albedo = np.asarray(albedo, dtype=np.float64)
-    n = pattern.count
-    if sample_ids.shape != (n,) or radiance.shape[0] != n or albedo.shape != radiance.shape:
-        raise MRTError(f"expected {n} traced samples with matching radiance and albedo")
-    bad = ~np.isfinite(radiance).all(axis=1)
-    if bad.any():
-        raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
-                       f"{int(bad.sum())} of {n} traced pixels")
+    sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
+                            params.id_rule)
     timings = {}
     start = time.perf_counter()
     ids = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))
@@ -139,12 +154,62 @@ def reconstruct(pattern: SamplePattern, sample_ids: np.ndarray, radiance: np.nda
 
     start = time.perf_counter()
     interp = interpolate_regions(
-        ids, pattern.pixel_xy, sample_ids, demodulate(radiance, albedo),
+        ids, pattern.pixel_xy, sample_ids, demodulate(trace.radiance, trace.albedo),
         max_inpoints=params.max_inpoints, num_cappoints=params.num_cappoints,
         rbf_degree=params.rbf_degree)
-    image = compose(interp.values, region_albedo(ids, pattern.pixel_xy, sample_ids, albedo),
-                    pattern.mask, radiance)
+    image = compose(interp.values, region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo),
+                    pattern.mask, trace.radiance)
     timings["interpolate"] = time.perf_counter() - start
     stats = Counter(interp.counts)
     stats["regions"] = int(len(np.unique(ids)))
     return Reconstruction(image, ids, pattern.mask, timings, stats)
+
+
+#: Reconstruction modes by name: ``fn(pattern, trace, params, tracer) -> Reconstruction``.
+MODES = {"paper": paper_reconstruct}
+
+
+def register_mode(name: str, function) -> None:
+    """Make a reconstruction function available as ``mode=name``."""
+    MODES[name] = function
+
+
+def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = MRTParams(),
+                mode: str = "paper", tracer=None) -> Reconstruction:
+    """Reconstruct the full image from the traced grid with one of :data:`MODES`.
+
+    Parameters
+    ----------
+    pattern : SamplePattern
+        The traced grid.
+    trace : SparseTrace
+        Radiance and AOVs of the traced pixels, rows outer, columns inner.
+    params : MRTParams
+    mode : str
+        A key of :data:`MODES` (``paper``, ``nearest``, ``bicubic``, ...).
+    tracer : callable, optional
+        ``tracer(pixel_xy) -> SparseTrace`` traces more pixels with the
+        nested integrator, for modes that refine.
+
+    Examples
+    --------
+    >>> from mitsuba_mrt.sampling import grid_pattern
+    >>> p = grid_pattern(8, 8, 0.25)
+    >>> t = SparseTrace(np.ones((p.count, 3)), np.full((p.count, 3), 0.5),
+    ...                 np.ones(p.count, int), np.ones(p.count, np.uint32), 1, 1, 0.0)
+    >>> out = reconstruct(p, t)
+    >>> float(out.image.min()), float(out.image.max())
+    (1.0, 1.0)
+    """
+    if mode not in MODES:
+        raise MRTError(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}")
+    n = pattern.count
+    shapes = (trace.radiance.shape, trace.albedo.shape, trace.shape_index.shape,
+              trace.visible_lights.shape)
+    if shapes != ((n, 3), (n, 3), (n,), (n,)):
+        raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
+    bad = ~np.isfinite(trace.radiance).all(axis=1)
+    if bad.any():
+        raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
+                       f"{int(bad.sum())} of {n} traced pixels")
+    return MODES[mode](pattern, trace, params, tracer)

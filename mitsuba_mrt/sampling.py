@@ -71,6 +71,25 @@ class SamplePattern:
         m[np.ix_(self.rows, self.cols)] = True
         return m
 
+    @cached_property
+    def nearest_rows(self) -> np.ndarray:
+        """(height,) index into ``rows`` of the grid row nearest to each image row."""
+        return _nearest_indices(self.rows, self.height)
+
+    @cached_property
+    def nearest_cols(self) -> np.ndarray:
+        """(width,) index into ``cols`` of the grid column nearest to each image column."""
+        return _nearest_indices(self.cols, self.width)
+
+    def nearest_image(self, grid_values: np.ndarray) -> np.ndarray:
+        """Every pixel takes the value of its nearest traced pixel.
+
+        On a tensor grid the Euclidean nearest sample is the nearest row
+        and nearest column, chosen independently (ties go to the lower one).
+        """
+        grid = np.asarray(grid_values).reshape(self.grid_shape + np.shape(grid_values)[1:])
+        return grid[self.nearest_rows[:, None], self.nearest_cols[None, :]]
+
     def to_image(self, grid_values: np.ndarray, fill=0) -> np.ndarray:
         """Scatter per-sample values (count, ...) into a full image."""
         grid_values = np.asarray(grid_values)
@@ -79,6 +98,16 @@ class SamplePattern:
         out[np.ix_(self.rows, self.cols)] = grid_values.reshape(
             self.grid_shape + grid_values.shape[1:])
         return out
+
+
+def _nearest_indices(positions: np.ndarray, length: int) -> np.ndarray:
+    pixels = np.arange(length)
+    upper = np.clip(np.searchsorted(positions, pixels), 1, max(len(positions) - 1, 1))
+    lower = upper - 1
+    if len(positions) == 1:
+        return np.zeros(length, dtype=np.int64)
+    take_upper = positions[upper] - pixels < pixels - positions[lower]
+    return np.where(take_upper, upper, lower)
 
 
 def grid_pattern(width: int, height: int, sample_fraction: float) -> SamplePattern:

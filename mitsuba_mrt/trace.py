@@ -13,48 +13,15 @@ from __future__ import annotations
 
 import re
 import time
-from dataclasses import dataclass
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from .errors import MRTError
+from .pipeline import SparseTrace
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32
-
-
-@dataclass
-class SparseTrace:
-    """What the trace learnt at each traced pixel.
-
-    Attributes
-    ----------
-    radiance : ndarray, shape (n, 3)
-        Mean radiance of the pixel's samples, from the nested integrator.
-    albedo : ndarray, shape (n, 3)
-        Diffuse reflectance at the pixel-centre hit (0 on a miss or a mirror).
-    shape_index : ndarray of int64, shape (n,)
-        0 for background, else 1 + the shape's position in :func:`ordered_shapes`.
-    visible_lights : ndarray of uint32, shape (n,)
-        Bit k set when tracked light k is unoccluded from the hit point.
-    num_lights : int
-        Number of tracked lights (point and spot lights, at most 32).
-    spp : int
-        Samples per pixel actually taken (the sampler may round the request:
-        ``stratified`` takes the next square power of two).
-    seconds : float
-        Wall time of the trace, kernel compilation included.
-    """
-
-    radiance: np.ndarray
-    albedo: np.ndarray
-    shape_index: np.ndarray
-    visible_lights: np.ndarray
-    num_lights: int
-    spp: int
-    seconds: float
 
 
 def tracked_lights(scene: mi.Scene) -> list:

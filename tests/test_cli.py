@@ -41,10 +41,11 @@ def test_render_writes_every_output(tmp_path):
 
 def test_json_flag_and_no_reference(tmp_path):
     proc = run_cli("render", SCENES / "paper_objects_2.xml", "-o", tmp_path, "-D", "res=32",
-                   "--no-reference", "--json", "--id-rule", "exact")
+                   "--no-reference", "--json", "--id-rule", "exact", "--mode", "bicubic")
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["error"] is None and summary["params"]["id_rule"] == "exact"
+    assert summary["mode"] == "bicubic"
     assert not (tmp_path / "paper_objects_2_ref.exr").exists()
 
 
@@ -57,6 +58,7 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "-D", "res"], "name=value"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),
     (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "--spp"),
+    (["render", SCENES / "paper_fraction.xml", "--mode", "magic"], "unknown mode"),
 ]
 
 
