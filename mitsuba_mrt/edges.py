@@ -89,7 +89,8 @@ def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
 
 
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
-               filter_cutoff: float = 0.05, background: int = 0) -> np.ndarray:
+               filter_cutoff: float = 0.05, background: int = 0,
+               boxes: dict | None = None) -> np.ndarray:
     """Soften the quadtree's jagged edges (report Algorithm 2, 8-13).
 
     For every id except ``background``, in increasing order, the 0/1 mask of
@@ -106,6 +107,10 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
         Gaussian standard deviation in pixels, >= 0 (0 leaves ids as they are).
     filter_cutoff : float
         Normalised threshold in [0, 1].
+    boxes : dict, optional
+        ``id -> (r0, r1, c0, c1)``, a box known to hold all pixels of the id
+        in ``ids`` (a caller that built ``ids`` may know them); by default
+        each id's box is found by scanning the image.
 
     Returns
     -------
@@ -128,18 +133,20 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
         return out
     reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation
     height, width = out.shape
-    for value in np.unique(out):
+    values = sorted(boxes) if boxes is not None else np.unique(out).tolist()
+    for value in values:
         if value == background:
             continue
-        mask = out == value
+        b0, b1, d0, d1 = boxes[value] if boxes is not None else (0, height, 0, width)
+        mask = out[b0:b1, d0:d1] == value
         rr = np.flatnonzero(mask.any(axis=1))
         if len(rr) == 0:  # all its pixels were taken by an earlier id
             continue
         cc = np.flatnonzero(mask.any(axis=0))
-        r0, r1 = max(rr[0] - reach, 0), min(rr[-1] + reach + 1, height)
-        c0, c1 = max(cc[0] - reach, 0), min(cc[-1] + reach + 1, width)
-        blurred = ndimage.gaussian_filter(mask[r0:r1, c0:c1].astype(np.float64),
-                                          filter_sigma)
+        r0, r1 = max(b0 + rr[0] - reach, 0), min(b0 + rr[-1] + reach + 1, height)
+        c0, c1 = max(d0 + cc[0] - reach, 0), min(d0 + cc[-1] + reach + 1, width)
+        mask = out[r0:r1, c0:c1] == value
+        blurred = ndimage.gaussian_filter(mask.astype(np.float32), filter_sigma)
         peak = blurred.max()
         if peak > 0.0:
             out[r0:r1, c0:c1][blurred / peak > filter_cutoff] = value

@@ -84,10 +84,15 @@ class SamplePattern:
     def nearest_image(self, grid_values: np.ndarray) -> np.ndarray:
         """Every pixel takes the value of its nearest traced pixel.
 
+        ``grid_values`` is either per sample, (count, ...), or grid-shaped,
+        (rows, cols, ...).
+
         On a tensor grid the Euclidean nearest sample is the nearest row
         and nearest column, chosen independently (ties go to the lower one).
         """
-        grid = np.asarray(grid_values).reshape(self.grid_shape + np.shape(grid_values)[1:])
+        grid = np.asarray(grid_values)
+        if grid.shape[:2] != self.grid_shape:  # per-sample values (count, ...)
+            grid = grid.reshape(self.grid_shape + grid.shape[1:])
         return grid[self.nearest_rows[:, None], self.nearest_cols[None, :]]
 
     def to_image(self, grid_values: np.ndarray, fill=0) -> np.ndarray:

@@ -36,3 +36,14 @@ def test_bundled_scenes_render(variant, name):
     reference, _ = mitsuba_mrt.render_reference(scene)
     assert np.isfinite(result.image).all()
     assert paper_error(result.image, reference) < 0.05
+
+
+@pytest.mark.parametrize("name", ["paper_objects_4.xml", "paper_lights_5.xml"])
+def test_fast_mode_is_at_least_as_accurate_as_the_paper_mode(variant, name):
+    scene = mitsuba_mrt.load_scene(SCENES / name, res=200)
+    reference, _ = mitsuba_mrt.render_reference(scene)
+    paper = paper_error(mitsuba_mrt.render(scene, mode="paper").image, reference)
+    fast = paper_error(mitsuba_mrt.render(scene, mode="fast").image, reference)
+    bicubic = paper_error(mitsuba_mrt.render(scene, mode="bicubic").image, reference)
+    assert fast <= 1.1 * paper
+    assert fast < bicubic

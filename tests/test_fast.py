@@ -1,0 +1,94 @@
+import numpy as np
+import pytest
+
+from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
+from mitsuba_mrt.fast import interpolate_within_ids, region_boxes, separable_cubic
+from mitsuba_mrt.edges import smooth_ids
+
+
+def trace_from(pattern, values, shape_index=None, albedo=None):
+    n = pattern.count
+    values = np.asarray(values, dtype=float).reshape(n, -1)
+    values = np.repeat(values, 3, axis=1) if values.shape[1] == 1 else values
+    return SparseTrace(values, np.ones((n, 3)) if albedo is None else albedo,
+                       np.ones(n, int) if shape_index is None else shape_index,
+                       np.zeros(n, np.uint32), 0, 1, 0.0)
+
+
+def test_cubic_is_exact_for_cubic_fields():
+    p = grid_pattern(60, 50, 0.1)
+    f = lambda x, y: 1 + 0.01 * x - 0.002 * y ** 2 + 1e-5 * x ** 3 + 1e-5 * x * y ** 2
+    x, y = p.pixel_xy[:, 0] * 1.0, p.pixel_xy[:, 1] * 1.0
+    out = separable_cubic(p, f(x, y).reshape(p.grid_shape + (1,)))
+    yy, xx = np.mgrid[:50, :60]
+    assert np.allclose(out[..., 0], f(xx * 1.0, yy * 1.0), atol=1e-9)
+
+
+def test_near_edges_quadratic_fields_stay_exact_on_each_side():
+    p = grid_pattern(64, 64, 0.1)
+    x, y = p.pixel_xy[:, 0] * 1.0, p.pixel_xy[:, 1] * 1.0
+    left = x < 30
+    values = np.where(left, 0.5 + 0.01 * x + 1e-4 * y * y, 3.0 - 0.02 * y + 1e-4 * x * x)
+    ids = np.where(left, 1, 2)
+    id_map = p.nearest_image(ids)
+    out, edge_pixels = interpolate_within_ids(p, ids.reshape(p.grid_shape),
+                                              values.reshape(p.grid_shape + (1,)), id_map)
+    yy, xx = np.mgrid[:64, :64] * 1.0
+    truth = np.where(id_map == 1, 0.5 + 0.01 * xx + 1e-4 * yy * yy, 3.0 - 0.02 * yy + 1e-4 * xx * xx)
+    assert edge_pixels > 0
+    # the ridge on the quadric's curvature (see fast._RIDGE) costs ~1e-3
+    # relative at one-sided corners; mixing the two sides would cost ~2.5
+    assert np.allclose(out[..., 0], truth, rtol=1e-3, atol=2e-3)
+
+
+def test_interpolation_never_crosses_an_edge():
+    p = grid_pattern(50, 40, 0.1)
+    ids = (p.pixel_xy[:, 0] + p.pixel_xy[:, 1] > 40).astype(int) + 1
+    values = np.where(ids == 1, 0.0, 1.0)
+    id_map = p.nearest_image(ids)
+    out, _ = interpolate_within_ids(p, ids.reshape(p.grid_shape),
+                                    values.reshape(p.grid_shape + (1,)), id_map)
+    assert np.allclose(out[..., 0][id_map == 1], 0.0, atol=1e-9)
+    assert np.allclose(out[..., 0][id_map == 2], 1.0, atol=1e-9)
+
+
+def test_region_boxes_hold_every_pixel_of_each_id():
+    p = grid_pattern(70, 45, 0.08)
+    rng = np.random.default_rng(3)
+    ids = rng.integers(0, 5, p.grid_shape)
+    id_map = p.nearest_image(ids)
+    for value, (r0, r1, c0, c1) in region_boxes(p, ids).items():
+        inside = np.zeros_like(id_map, dtype=bool)
+        inside[r0:r1, c0:c1] = True
+        assert not ((id_map == value) & ~inside).any()
+    assert np.array_equal(smooth_ids(id_map, 1.5, 0.1, boxes=region_boxes(p, ids)),
+                          smooth_ids(id_map, 1.5, 0.1))
+
+
+def test_skips_fire_and_are_counted():
+    p = grid_pattern(32, 32, 0.2)
+    one_id = reconstruct(p, trace_from(p, np.ones(p.count)), mode="fast")
+    assert one_id.stats["skipped_edge_finding"] == 1
+    assert one_id.stats["skipped_albedo_division"] == 1
+    textured = np.where((p.pixel_xy[:, :1] // 8) % 2 == 0, 0.2, 0.8) * np.ones((1, 3))
+    radiance = textured * (1 + p.pixel_xy[:, :1] / 32.0)
+    out = reconstruct(p, trace_from(p, radiance, albedo=textured), mode="fast")
+    assert out.stats["skipped_albedo_division"] == 0
+
+
+def test_traced_pixels_are_exact():
+    p = grid_pattern(30, 30, 0.15)
+    rng = np.random.default_rng(0)
+    radiance = rng.random((p.count, 3)).astype(np.float32).astype(float)  # as Mitsuba gives
+    t = trace_from(p, radiance, shape_index=rng.integers(1, 4, p.count))
+    out = reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
+    assert np.array_equal(out.image[p.mask], t.radiance)
+    assert np.isfinite(out.image).all()
+
+
+@pytest.mark.parametrize("shape", [(3, 40), (40, 3), (2, 2)])
+def test_tiny_grids(shape):
+    h, w = shape
+    p = grid_pattern(w, h, 0.5)
+    out = reconstruct(p, trace_from(p, np.arange(p.count, dtype=float)), mode="fast")
+    assert np.isfinite(out.image).all()
