@@ -21,9 +21,10 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import MRTError
-from .pipeline import MRTParams, Reconstruction, reconstruct
+from .ids import encode_ids
+from .pipeline import MRTParams, Reconstruction, SparseTrace, reconstruct
 from .sampling import SamplePattern, grid_pattern
-from .trace import SparseTrace, trace_pixels
+from .trace import trace_pixels
 
 
 @dataclass
@@ -101,9 +102,19 @@ def nested_integrator(scene: mi.Scene, integrator=None):
     return integrator, None
 
 
+#: ``auto`` runs the MRT only when its predicted time is below this share of
+#: the predicted full render: a wide margin, since the pilot is small.
+AUTO_MARGIN = 0.6
+#: ``auto``'s pilot traces the top 1/AUTO_BAND of the image's rows.
+AUTO_BAND = 16
+#: Below this many samples (pixels x spp) a full render costs no more than a
+#: few launches, less than a pilot would add: ``auto`` renders it directly.
+AUTO_MIN_SAMPLES = 1 << 18
+
+
 def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0,
            spp: int | None = None, seed: int = 0, params: MRTParams | None = None,
-           mode: str = "paper", **param_overrides) -> MRTResult:
+           mode: str = "auto", **param_overrides) -> MRTResult:
     """Render ``scene`` with the MRT: trace the grid, reconstruct the rest.
 
     Parameters
@@ -118,27 +129,172 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     seed : int
     params : MRTParams, optional
     mode : str
-        Reconstruction mode, a key of :data:`mitsuba_mrt.pipeline.MODES`.
+        ``auto`` (default): the ``fast`` MRT when a measured pilot predicts
+        it beats a full render, otherwise the full render itself (see
+        ``stats["mode_used"]``); or any key of
+        :data:`mitsuba_mrt.pipeline.MODES` (``paper``, ``fast``, ...).
     **param_overrides
         Fields of :class:`MRTParams` (``sample_fraction=0.05`` ...).
     """
+    from .pipeline import MODES
+
     start = time.perf_counter()
+    if mode != "auto" and mode not in MODES:
+        raise MRTError(f"unknown mode {mode!r}; choose one of auto, {', '.join(MODES)}")
     nested, scene_params = nested_integrator(scene, integrator)
     params = (params or scene_params or MRTParams()).with_(**param_overrides)
     sensor = _sensor(scene, sensor)
     spp = int(spp or sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     pattern = grid_pattern(width, height, params.sample_fraction)
-    trace = trace_pixels(scene, sensor, nested, pattern.pixel_xy, spp, seed)
 
-    def tracer(pixel_xy):
-        return trace_pixels(scene, sensor, nested, pixel_xy, spp, seed + 1)
+    def tracer(pixel_xy, seed_offset=1, aovs=True):
+        return trace_pixels(scene, sensor, nested, pixel_xy, spp, seed + seed_offset, aovs)
 
-    recon: Reconstruction = reconstruct(pattern, trace, params, mode, tracer)
+    if mode == "auto":
+        decision = _auto_decide(pattern, tracer, spp)
+        if decision["mode_used"] == "full":
+            return _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params,
+                                  decision, start)
+        trace, used = decision.pop("trace"), "fast"
+    else:
+        trace, decision, used = tracer(pattern.pixel_xy, 0), {}, mode
+
+    recon: Reconstruction = reconstruct(pattern, trace, params, used, tracer)
     timings = {"trace": trace.seconds, **recon.timings,
                "total": time.perf_counter() - start}
+    stats = {**decision, **dict(recon.stats), "mode_used": used}
     return MRTResult(recon.image, recon.ids, recon.traced_mask, pattern, trace, params,
-                     trace.spp, mode, timings, dict(recon.stats))
+                     trace.spp, mode, timings, stats)
+
+
+def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
+    """Decide between the fast MRT and a full render from a measured pilot.
+
+    Small jobs (fewer than ``AUTO_MIN_SAMPLES`` samples) are rendered in
+    full without a pilot.  Otherwise the pilot traces the top
+    ``1 / AUTO_BAND`` of the image: every pixel with the nested integrator
+    alone (what a full render pays; kept as part of the image if the full
+    render wins) and the grid rows in it with the id AOVs (what the MRT pays
+    per traced pixel).  Scaled to the whole image, with the reconstruction's
+    cost per pixel calibrated once per process, the MRT runs only if it is
+    predicted below ``AUTO_MARGIN`` of the full render.
+    """
+    nr, nc = pattern.grid_shape
+    width, height = pattern.width, pattern.height
+    pixels = width * height
+    if pixels * spp < AUTO_MIN_SAMPLES or height < 2 * AUTO_BAND:
+        return {"mode_used": "full", "auto_reason": "small", "pilot_pixels": 0}
+    band_height = height // AUTO_BAND
+    band_xy = np.stack(np.meshgrid(np.arange(width), np.arange(band_height)), -1).reshape(-1, 2)
+    band = tracer(band_xy, 0, False)
+    xy = pattern.pixel_xy.reshape(nr, nc, 2)
+    pilot_rows = np.flatnonzero(pattern.rows < band_height)
+    pilot = tracer(xy[pilot_rows].reshape(-1, 2), 2)
+    scale = height / band_height
+    predicted_full = band.seconds * scale
+    predicted_mrt = (pilot.seconds * nr / max(len(pilot_rows), 1)
+                     + _reconstruction_seconds_per_pixel() * pixels)
+    wins = predicted_mrt < AUTO_MARGIN * predicted_full
+    decision = {"mode_used": "fast" if wins else "full", "auto_reason": "pilot",
+                "predicted_mrt_s": predicted_mrt, "predicted_full_s": predicted_full,
+                "pilot_pixels": int(len(band_xy) + pilot.radiance.shape[0]),
+                "band": band, "band_height": band_height}
+    if wins:
+        rest_rows = np.setdiff1d(np.arange(nr), pilot_rows)
+        rest = tracer(xy[rest_rows].reshape(-1, 2), 0)
+        merged = _merge_rows(pattern, pilot_rows, pilot, rest_rows, rest)
+        decision["trace"] = _with_seconds(merged, band.seconds + pilot.seconds + rest.seconds)
+        del decision["band"], decision["band_height"]
+    else:
+        decision["pilot"] = (pilot_rows, pilot)
+    return decision
+
+
+def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, decision, start):
+    """The full render that ``auto`` falls back to, as an MRTResult.
+
+    Without a pilot it is a plain ``mi.render``.  After a pilot, the pilot's
+    band is kept and the remaining rows are traced the same way (every
+    sample of a pixel averaged, as the box pixel filter of the bundled
+    scenes does), so the pilot is not wasted.  Ids are not traced per pixel:
+    the pilot's grid ids (or none) are nearest-filled.
+    """
+    width, height = pattern.width, pattern.height
+    band = decision.pop("band", None)
+    pilot_rows, pilot = decision.pop("pilot", (None, None))
+    decision.pop("band_height", None)
+    if band is None:
+        image, seconds = render_reference(scene, nested, sensor=sensor, spp=spp, seed=seed)
+        ids = np.zeros((height, width), dtype=np.int64)
+        trace_s = 0.0
+    else:
+        band_height = len(band.radiance) // width
+        rest_xy = np.stack(np.meshgrid(np.arange(width), np.arange(band_height, height)),
+                           -1).reshape(-1, 2)
+        rest = tracer(rest_xy, 1, False)
+        image = np.concatenate([band.radiance, rest.radiance]).reshape(height, width, 3)
+        seconds = band.seconds + rest.seconds
+        bad = ~np.isfinite(image).all(axis=-1)
+        if bad.any():
+            raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
+                           f"{int(bad.sum())} pixels")
+        sub = SamplePattern(width, height, pattern.rows[pilot_rows], pattern.cols)
+        ids = sub.nearest_image(encode_ids(pilot.shape_index, pilot.visible_lights,
+                                           pilot.num_lights, params.rule_for("fast")))
+        trace_s = pilot.seconds
+    timings = {"trace": trace_s, "edges": 0.0, "interpolate": 0.0, "full_render": seconds,
+               "total": time.perf_counter() - start}
+    empty = SparseTrace(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64),
+                        np.zeros(0, np.uint32), 0, spp, 0.0)
+    return MRTResult(image, ids, np.ones((height, width), dtype=bool), pattern,
+                     pilot if pilot is not None else empty, params, spp, "auto", timings,
+                     decision)
+
+
+def _with_seconds(trace: SparseTrace, seconds: float) -> SparseTrace:
+    return SparseTrace(trace.radiance, trace.albedo, trace.shape_index, trace.visible_lights,
+                       trace.num_lights, trace.spp, seconds)
+
+
+def _merge_rows(pattern, rows_a, trace_a, rows_b, trace_b) -> SparseTrace:
+    """Two traces of disjoint grid rows, as one trace in grid order."""
+    nr, nc = pattern.grid_shape
+    order = np.empty(nr, dtype=np.int64)
+    order[np.concatenate([rows_a, rows_b])] = np.arange(nr)
+    def merge(a, b):
+        both = np.concatenate([a.reshape(len(rows_a), nc, -1), b.reshape(len(rows_b), nc, -1)])
+        return both[order].reshape((nr * nc,) + a.shape[1:])
+    return SparseTrace(merge(trace_a.radiance, trace_b.radiance),
+                       merge(trace_a.albedo, trace_b.albedo),
+                       merge(trace_a.shape_index, trace_b.shape_index),
+                       merge(trace_a.visible_lights, trace_b.visible_lights),
+                       trace_a.num_lights, trace_a.spp, 0.0)
+
+
+_RECON_COST = {}
+
+
+def _reconstruction_seconds_per_pixel() -> float:
+    """Seconds per pixel of the fast reconstruction, measured once per process.
+
+    A synthetic 256 x 256 scene of two regions stands in for a real one;
+    the result is doubled, since real scenes have more edges.
+    """
+    if "fast" not in _RECON_COST:
+        from .pipeline import reconstruct as run
+
+        p = grid_pattern(256, 256, 0.1)
+        x, y = p.pixel_xy[:, 0], p.pixel_xy[:, 1]
+        shape = 1 + ((x - 128) ** 2 + (y - 128) ** 2 < 60 ** 2)
+        rad = np.repeat((0.5 + 0.001 * x)[:, None], 3, axis=1)
+        trace = SparseTrace(rad, np.ones((p.count, 3)), shape, np.zeros(p.count, np.uint32),
+                            0, 1, 0.0)
+        run(p, trace, MRTParams(id_rule="exact"), "fast")  # warm caches
+        begin = time.perf_counter()
+        run(p, trace, MRTParams(id_rule="exact"), "fast")
+        _RECON_COST["fast"] = 2.0 * (time.perf_counter() - begin) / (256 * 256)
+    return _RECON_COST["fast"]
 
 
 def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *,

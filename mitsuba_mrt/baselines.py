@@ -67,7 +67,7 @@ def _baseline(upsample):
         image[pattern.mask] = trace.radiance
         seconds = time.perf_counter() - start
         sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                                params.id_rule)
+                                params.rule_for("nearest"))
         ids = pattern.nearest_image(sample_ids)
         return Reconstruction(image, ids, pattern.mask, {"edges": 0.0, "interpolate": seconds},
                               Counter(regions=int(len(np.unique(ids)))))

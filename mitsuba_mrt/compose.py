@@ -52,6 +52,9 @@ def region_values(id_map: np.ndarray, sample_ids: np.ndarray, sample_values: np.
     array([[0.3, 0. ]])
     """
     sample_values = np.asarray(sample_values)
+    if len(sample_values) == 0:
+        return np.full(np.shape(id_map) + sample_values.shape[1:], fill,
+                       dtype=np.result_type(sample_values.dtype, np.asarray(fill).dtype))
     regions, first, inverse = np.unique(np.asarray(sample_ids), return_index=True,
                                         return_inverse=True)
     if how == "mean":

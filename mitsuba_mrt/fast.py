@@ -255,7 +255,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     stats = Counter()
     start = time.perf_counter()
     sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            params.id_rule)
+                            params.rule_for("fast"))
     grid_ids = sample_ids.reshape(pattern.grid_shape)
     id_map = pattern.nearest_image(grid_ids)
     stats["regions"] = int(len(np.unique(sample_ids)))

@@ -30,7 +30,7 @@ class RenderJob:
     seed: int = 0
     variant: str = "auto"
     reference: bool = True
-    mode: str = "paper"
+    mode: str = "auto"
 
 
 def _environment(variant: str) -> dict:
@@ -71,12 +71,15 @@ def run_render_job(job: RenderJob) -> dict:
     summary = {
         "scene": os.fspath(job.scene), "variant": variant, "width": width,
         "height": height, "spp": result.spp, "mode": result.mode,
+        "mode_used": result.stats.get("mode_used", result.mode),
+        "skipped": {k[len("skipped_"):]: v for k, v in result.stats.items()
+                    if k.startswith("skipped_")},
         "sample_fraction": result.params.sample_fraction,
-        "traced_pixels": int(result.pattern.count),
+        "traced_pixels": int(result.traced_mask.sum()),
         "timings": {k: result.timings[k] for k in ("trace", "edges", "interpolate", "total")},
         "reference_time_s": None, "relative_time": None, "error": None, "psnr_db": None,
         "params": result.params.as_dict(), "defines": dict(job.defines), "seed": job.seed,
-        "stats": result.stats, "environment": _environment(variant), "outputs": [],
+        "stats": {k: v for k, v in result.stats.items() if not k.startswith("skipped_")}, "environment": _environment(variant), "outputs": [],
     }
     files = summary["outputs"]
     channels = {"R": result.image[..., 0], "G": result.image[..., 1], "B": result.image[..., 2]}
@@ -111,4 +114,5 @@ def summary_line(summary: dict) -> str:
     if summary["reference_time_s"] is not None:
         line += (f", reference {summary['reference_time_s']:.3f} s, "
                  f"error {summary['error']:.5f}, PSNR {summary['psnr_db']:.2f} dB")
-    return line + f" [{summary['variant']}]"
+    used = summary["mode_used"]
+    return line + f" [{summary['variant']}, mode {used}]"

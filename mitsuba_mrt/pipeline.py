@@ -37,8 +37,9 @@ class MRTParams:
         Most RBF centres per id.
     num_cappoints : int
         Brightest and darkest samples kept as capstones (each).
-    id_rule : {'paper', 'exact'}
-        How ids are made from shape and light visibility (see ``ids``).
+    id_rule : {'auto', 'paper', 'exact'}
+        How ids are made from shape and light visibility (see ``ids``);
+        ``auto``: the report's rule in mode ``paper``, ``exact`` elsewhere.
     rbf_degree : {-1, 0, 1}
         Polynomial degree added to the linear RBF (-1: the report's).
     """
@@ -48,7 +49,7 @@ class MRTParams:
     filter_cutoff: float = 0.05
     max_inpoints: int = 2000
     num_cappoints: int = 10
-    id_rule: str = "paper"
+    id_rule: str = "auto"
     rbf_degree: int = -1
 
     def __post_init__(self):
@@ -61,10 +62,17 @@ class MRTParams:
             raise MRTError(f"max_inpoints must be an integer >= 1, got {self.max_inpoints}")
         if int(self.num_cappoints) != self.num_cappoints or self.num_cappoints < 0:
             raise MRTError(f"num_cappoints must be an integer >= 0, got {self.num_cappoints}")
-        if self.id_rule not in ID_RULES:
-            raise MRTError(f"id_rule must be one of {', '.join(ID_RULES)}, got {self.id_rule!r}")
+        if self.id_rule not in ("auto",) + ID_RULES:
+            raise MRTError(f"id_rule must be one of auto, {', '.join(ID_RULES)}, "
+                           f"got {self.id_rule!r}")
         if self.rbf_degree not in (-1, 0, 1):
             raise MRTError(f"rbf_degree must be -1, 0 or 1, got {self.rbf_degree}")
+
+    def rule_for(self, mode: str) -> str:
+        """The id rule in force for ``mode`` (``auto`` resolved)."""
+        if self.id_rule != "auto":
+            return self.id_rule
+        return "paper" if mode == "paper" else "exact"
 
     def with_(self, **changes) -> "MRTParams":
         """A copy with some fields changed (None values are ignored)."""
@@ -145,7 +153,7 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
         Unused: this mode traces nothing beyond the grid.
     """
     sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            params.id_rule)
+                            params.rule_for("paper"))
     timings = {}
     start = time.perf_counter()
     ids = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))

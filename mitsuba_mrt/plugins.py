@@ -21,6 +21,16 @@ def _not(mask):
     return ~mask if _jit() else not mask
 
 
+def has_mirrors(scene: mi.Scene) -> bool:
+    """True if a shape of ``scene`` has a purely specular (delta) BSDF."""
+    for shape in scene.shapes():
+        bsdf = shape.bsdf()
+        flags = int(bsdf.flags()) if bsdf is not None else 0
+        if mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth):
+            return True
+    return False
+
+
 class MatteIntegrator(mi.SamplingIntegrator):
     r"""Deterministic point-light shading, the report's underlying ray-tracer.
 
@@ -55,7 +65,9 @@ class MatteIntegrator(mi.SamplingIntegrator):
         result = mi.Spectrum(0.0)
         throughput = mi.Spectrum(1.0)
         first_hit = mi.Bool(False)
-        for depth in range(self.max_depth + 1):
+        # Without mirrors there is nothing to follow: one hit, a smaller kernel.
+        max_depth = self.max_depth if has_mirrors(scene) else 0
+        for depth in range(max_depth + 1):
             si = scene.ray_intersect(ray, active)
             valid = active & si.is_valid()
             if depth == 0:
@@ -72,7 +84,7 @@ class MatteIntegrator(mi.SamplingIntegrator):
                 f = bsdf.eval(ctx, si, si.to_local(ds.d), shade)
                 lit = shade & _not(scene.ray_test(si.spawn_ray_to(ds.p), shade))
                 result += dr.select(lit, throughput * f * intensity, 0.0)
-            if depth == self.max_depth or not (_jit() or mirror):
+            if depth == max_depth or not (_jit() or mirror):
                 break
             bs, weight = bsdf.sample(ctx, si, sampler.next_1d(mirror),
                                      sampler.next_2d(mirror), mirror)
@@ -120,10 +132,16 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - Brightest and darkest capstone samples per id, each (Default: 10).
      * - id_rule
        - |string|
-       - ``paper`` (shape + 0.5 per blocked light) or ``exact`` (Default: paper).
+       - ``paper`` (shape + 0.5 per blocked light), ``exact`` (never collides), or
+         ``auto``: paper in mode paper, exact elsewhere (Default: auto).
      * - rbf_degree
        - |int|
        - Polynomial degree added to the RBF: -1 (report), 0 or 1 (Default: -1).
+     * - mode
+       - |string|
+       - Reconstruction: ``auto`` (the fast MRT when a pilot predicts it
+         beats a full render, else the full render), ``fast``, ``paper``,
+         ``nearest``, ``bicubic`` (Default: auto).
      * - aovs
        - |bool|
        - Append the id AOV channels to the output (Default: true).
@@ -149,8 +167,10 @@ class MRTIntegrator(mi.SamplingIntegrator):
             filter_cutoff=float(props.get("filter_cutoff", 0.05)),
             max_inpoints=int(props.get("max_inpoints", 2000)),
             num_cappoints=int(props.get("num_cappoints", 10)),
-            id_rule=str(props.get("id_rule", "paper")),
+            id_rule=str(props.get("id_rule", "auto")),
             rbf_degree=int(props.get("rbf_degree", -1)))
+        # Reconstruction mode (see mitsuba_mrt.api.render).
+        self.mode = str(props.get("mode", "auto"))
         # Whether mi.render returns the id AOVs after R, G, B.
         self.output_aovs = bool(props.get("aovs", True))
         # The last MRTResult, for callers who want timings and statistics.
@@ -162,7 +182,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
         if not develop:
             raise MRTError("mrt: only develop=True is supported")
         result = render(scene, self.nested, sensor=sensor, spp=int(spp) or None,
-                        seed=int(seed), params=self.params)
+                        seed=int(seed), params=self.params, mode=self.mode)
         self.last_result = result
         channels = [result.image]
         if self.output_aovs:
@@ -193,8 +213,8 @@ def aov_images(result) -> dict[str, np.ndarray]:
 
     trace, ids = result.trace, result.ids
     sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            result.params.id_rule)
-    if result.params.id_rule == "paper":
+                            result.params.rule_for(result.mode))
+    if result.params.rule_for(result.mode) == "paper":
         id_image = ids / 2.0
     else:
         id_image = np.searchsorted(np.unique(ids), ids).astype(np.float64)

@@ -107,7 +107,7 @@ def _shape_lookup(scene: mi.Scene):
 
 
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
-                 pixel_xy: np.ndarray, spp: int, seed: int = 0) -> SparseTrace:
+                 pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -121,6 +121,9 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         Samples per traced pixel (averaged, as a box pixel filter does).
     seed : int
         Seed of the sampler.
+    aovs : bool
+        Also trace the id AOVs (albedo, shape, visible lights); without
+        them those fields are zero and only the radiance costs time.
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -135,26 +138,33 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     sampler.set_sample_count(spp)
     spp = sampler.sample_count()
     trace = (_trace_jit if _is_jit() else _trace_scalar)(
-        scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup)
+        scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs)
     radiance, albedo, shape_index, visible = trace
     return SparseTrace(radiance, albedo, shape_index, visible, len(lights), spp,
                        time.perf_counter() - start)
 
 
-def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup):
+def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs):
     n = len(pixel_xy)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
-    lanes = np.repeat(pixel_xy, spp, axis=0)
-    pixel = mi.Point2f(mi.Float(lanes[:, 0]), mi.Float(lanes[:, 1]))
+    columns, rows = mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1])
+    if spp == 1:
+        pixel = mi.Point2f(columns, rows)
+    else:  # lanes pixel-major, as Mitsuba's own render loop lays them out
+        owner = dr.arange(mi.UInt32, n * spp) // spp
+        pixel = mi.Point2f(dr.gather(mi.Float, columns, owner), dr.gather(mi.Float, rows, owner))
     ray, weight = _camera_ray(sensor, sampler, pixel, spp)
     radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
     radiance = mi.Color3f(weight * radiance)
+    if spp > 1:
+        radiance = dr.block_sum(radiance, spp) / spp
     dr.eval(radiance)
-    radiance = _to_numpy(radiance, n * spp).reshape(n, spp, 3).mean(axis=1)
+    radiance = _to_numpy(radiance, n)
+    if not aovs:
+        return radiance, np.zeros((n, 3)), np.zeros(n, np.int64), np.zeros(n, np.uint32)
 
-    centre_pixel = mi.Point2f(mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1]))
-    ray, _ = _camera_ray(sensor, sampler, centre_pixel, 1, centre=True)
+    ray, _ = _camera_ray(sensor, sampler, mi.Point2f(columns, rows), 1, centre=True)
     si, valid, albedo, mask = _surface_aovs(scene, ray, lights)
     pointers = dr.reinterpret_array(mi.UInt32, si.shape)
     dr.eval(albedo, mask, pointers)
@@ -167,7 +177,7 @@ def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, 
             _to_numpy(mask, n).astype(np.uint32))
 
 
-def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup):
+def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs):
     n = len(pixel_xy)
     radiance = np.zeros((n, 3))
     albedo = np.zeros((n, 3))
@@ -181,6 +191,8 @@ def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, light
             value, _, _ = integrator.sample(scene, sampler, ray, None, True)
             radiance[k] += np.asarray(weight * value, dtype=np.float64)
             sampler.advance()
+        if not aovs:
+            continue
         ray, _ = _camera_ray(sensor, sampler, pixel, 1, centre=True)
         si, valid, alb, mask = _surface_aovs(scene, ray, lights)
         if valid:

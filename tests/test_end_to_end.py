@@ -10,7 +10,7 @@ from conftest import SCENES
 
 def test_paper_fraction_scene_is_in_the_reports_error_range(variant):
     scene = mitsuba_mrt.load_scene(SCENES / "paper_fraction.xml", res=200)
-    result = mitsuba_mrt.render(scene, sample_fraction=0.1)
+    result = mitsuba_mrt.render(scene, sample_fraction=0.1, mode="paper")
     reference, _ = mitsuba_mrt.render_reference(scene)
     assert result.image.shape == (200, 200, 3)
     error = paper_error(result.image, reference)
@@ -23,7 +23,8 @@ def test_paper_fraction_scene_is_in_the_reports_error_range(variant):
 def test_error_falls_with_sample_fraction(variant):
     scene = mitsuba_mrt.load_scene(SCENES / "paper_fig1.xml", res=120)
     reference, _ = mitsuba_mrt.render_reference(scene)
-    errors = [paper_error(mitsuba_mrt.render(scene, sample_fraction=f).image, reference)
+    errors = [paper_error(mitsuba_mrt.render(scene, sample_fraction=f, mode="paper").image,
+                          reference)
               for f in (0.05, 0.25)]
     assert errors[1] < errors[0]
 
@@ -32,10 +33,11 @@ def test_error_falls_with_sample_fraction(variant):
                                   "paper_fig1_conductor.xml"])
 def test_bundled_scenes_render(variant, name):
     scene = mitsuba_mrt.load_scene(SCENES / name, res=64)
-    result = mitsuba_mrt.render(scene)
     reference, _ = mitsuba_mrt.render_reference(scene)
-    assert np.isfinite(result.image).all()
-    assert paper_error(result.image, reference) < 0.05
+    for mode in ("paper", "fast"):
+        result = mitsuba_mrt.render(scene, mode=mode)
+        assert np.isfinite(result.image).all()
+        assert paper_error(result.image, reference) < 0.05
 
 
 @pytest.mark.parametrize("name", ["paper_objects_4.xml", "paper_lights_5.xml"])

@@ -92,7 +92,8 @@ def counting_integrator(nested):
 def test_only_the_grid_pixels_are_traced(variant, fraction, spp, taken):
     scene = mi.load_string(small_scene_xml(40))
     counting = counting_integrator(scene.integrator())
-    result = mitsuba_mrt.render(scene, counting, spp=spp, sample_fraction=fraction)
+    result = mitsuba_mrt.render(scene, counting, spp=spp, sample_fraction=fraction,
+                                mode="paper")
     expected = grid_pattern(40, 40, fraction).count
     assert result.spp == taken  # the stratified sampler rounds 3 up to 4
     assert counting.rays == expected * taken
@@ -101,7 +102,7 @@ def test_only_the_grid_pixels_are_traced(variant, fraction, spp, taken):
 
 def test_traced_pixels_equal_the_full_render(variant):
     scene = mi.load_string(small_scene_xml(48))
-    result = mitsuba_mrt.render(scene, sample_fraction=0.2)
+    result = mitsuba_mrt.render(scene, sample_fraction=0.2, mode="fast")
     reference, _ = mitsuba_mrt.render_reference(scene)
     m = result.traced_mask
     assert np.allclose(result.image[m], reference[m], atol=1e-6)
@@ -110,7 +111,7 @@ def test_traced_pixels_equal_the_full_render(variant):
 
 def test_ids_come_from_the_trace(variant):
     scene = mi.load_string(small_scene_xml(32))
-    result = mitsuba_mrt.render(scene, sample_fraction=0.3, id_rule="exact")
+    result = mitsuba_mrt.render(scene, sample_fraction=0.3, id_rule="exact", mode="paper")
     trace = result.trace
     assert set(np.unique(trace.shape_index)) == {1, 2}  # sphere, floor (no background)
     assert trace.num_lights == 2
@@ -123,6 +124,7 @@ def test_ids_come_from_the_trace(variant):
 def test_mrt_plugin_from_xml(variant):
     xml = small_scene_xml(32, integrator="""<integrator type="mrt">
         <float name="sample_fraction" value="0.25"/><float name="filter_sigma" value="1.5"/>
+        <string name="mode" value="paper"/>
         <integrator type="matte"/></integrator>""")
     scene = mi.load_string(xml)
     integrator = scene.integrator()
@@ -136,7 +138,7 @@ def test_mrt_plugin_from_xml(variant):
     traced = image[..., 6] == 1
     assert np.allclose(image[traced][:, :3], full[traced][:, :3], atol=1e-6)
     # the API sees the wrapper's parameters
-    assert mitsuba_mrt.render(scene).params.filter_sigma == 1.5
+    assert mitsuba_mrt.render(scene, mode="paper").params.filter_sigma == 1.5
 
 
 def test_mrt_plugin_rejects_bad_parameters(variant):
@@ -159,9 +161,10 @@ def test_mrt_plugin_with_path_integrator(variant):
 def test_degenerate_scenes_render_without_nan(variant, kind):
     scene = mi.load_string(small_scene_xml(24, shapes=kind != "no_shapes",
                                            lights=kind != "no_lights"))
-    result = mitsuba_mrt.render(scene)
-    assert np.isfinite(result.image).all()
-    assert (result.image == 0).all()
+    for mode in ("paper", "fast", "auto"):
+        result = mitsuba_mrt.render(scene, mode=mode)
+        assert np.isfinite(result.image).all()
+        assert (result.image == 0).all()
 
 
 def test_nan_radiance_is_a_clear_error(variant):
@@ -171,18 +174,45 @@ def test_nan_radiance_is_a_clear_error(variant):
 
     scene = mi.load_string(small_scene_xml(16))
     with pytest.raises(MRTError, match="NaN or Inf radiance at 256 of 256"):
-        mitsuba_mrt.render(scene, NaNIntegrator(mi.Properties()), sample_fraction=1.0)
+        mitsuba_mrt.render(scene, NaNIntegrator(mi.Properties()), sample_fraction=1.0,
+                           mode="paper")
 
 
 def test_scalar_variant_gives_the_same_trace(variant):
     xml = small_scene_xml(24)
-    llvm_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2)
+    llvm_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2, mode="paper")
     try:
         mi.set_variant("scalar_rgb")
-        scalar_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2)
+        scalar_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2,
+                                           mode="paper")
     finally:
         mi.set_variant(variant)
     assert np.allclose(scalar_result.trace.radiance, llvm_result.trace.radiance, atol=1e-5)
     assert np.array_equal(scalar_result.trace.shape_index, llvm_result.trace.shape_index)
     assert np.array_equal(scalar_result.trace.visible_lights, llvm_result.trace.visible_lights)
     assert np.allclose(scalar_result.image, llvm_result.image, atol=1e-4)
+
+
+def test_auto_renders_small_jobs_in_full_without_a_pilot(variant):
+    scene = mi.load_string(small_scene_xml(32))
+    result = mitsuba_mrt.render(scene)
+    reference, _ = mitsuba_mrt.render_reference(scene)
+    assert result.stats["mode_used"] == "full" and result.stats["auto_reason"] == "small"
+    assert np.allclose(result.image, reference)
+
+
+@pytest.mark.parametrize("margin,used", [(0.0, "full"), (1e9, "fast")])
+def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch, margin, used):
+    import mitsuba_mrt.api as api
+
+    monkeypatch.setattr(api, "AUTO_MARGIN", margin)
+    scene = mi.load_string(small_scene_xml(512))  # 2^18 samples: large enough for a pilot
+    result = mitsuba_mrt.render(scene)
+    reference, _ = mitsuba_mrt.render_reference(scene)
+    assert result.stats["mode_used"] == used and result.stats["auto_reason"] == "pilot"
+    assert result.stats["predicted_full_s"] > 0 and result.stats["predicted_mrt_s"] > 0
+    if used == "full":  # the pilot's band is kept; matte is deterministic
+        assert np.allclose(result.image, reference, atol=1e-6)
+    else:
+        assert result.traced_mask.sum() == grid_pattern(512, 512, 0.1).count
+        assert paper_error(result.image, reference) < 0.01
