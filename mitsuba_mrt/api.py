@@ -164,6 +164,8 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     timings = {"trace": trace.seconds, **recon.timings,
                "total": time.perf_counter() - start}
     stats = {**decision, **dict(recon.stats), "mode_used": used}
+    if not trace.shadow_rays:
+        stats["skipped_shadow_rays"] = 1
     return MRTResult(recon.image, recon.ids, recon.traced_mask, pattern, trace, params,
                      trace.spp, mode, timings, stats)
 
@@ -254,7 +256,7 @@ def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, de
 
 def _with_seconds(trace: SparseTrace, seconds: float) -> SparseTrace:
     return SparseTrace(trace.radiance, trace.albedo, trace.shape_index, trace.visible_lights,
-                       trace.num_lights, trace.spp, seconds)
+                       trace.num_lights, trace.spp, seconds, trace.shadow_rays)
 
 
 def _merge_rows(pattern, rows_a, trace_a, rows_b, trace_b) -> SparseTrace:
@@ -269,7 +271,7 @@ def _merge_rows(pattern, rows_a, trace_a, rows_b, trace_b) -> SparseTrace:
                        merge(trace_a.albedo, trace_b.albedo),
                        merge(trace_a.shape_index, trace_b.shape_index),
                        merge(trace_a.visible_lights, trace_b.visible_lights),
-                       trace_a.num_lights, trace_a.spp, 0.0)
+                       trace_a.num_lights, trace_a.spp, 0.0, trace_a.shadow_rays)
 
 
 _RECON_COST = {}

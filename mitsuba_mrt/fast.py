@@ -205,7 +205,8 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
 
 
 def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
-                           grid_values: np.ndarray, id_map: np.ndarray) -> tuple[np.ndarray, int]:
+                           grid_values: np.ndarray, id_map: np.ndarray,
+                           constant: dict | None = None) -> tuple[np.ndarray, int]:
     """Interpolate grid values at every pixel from samples of the pixel's own id.
 
     Parameters
@@ -214,6 +215,9 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     grid_ids : ndarray of int, shape pattern.grid_shape
     grid_values : ndarray, shape pattern.grid_shape + (C,)
     id_map : ndarray of int, shape (height, width)
+    constant : dict, optional
+        ``id -> value`` for ids known to be constant (e.g. a black
+        background): their pixels near edges are filled, not fitted.
 
     Returns
     -------
@@ -231,6 +235,10 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
         fx, _ = cubic_weights(pattern.cols, pattern.width)
         stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
         slow = stencil_id[fy[:, None], fx[None, :]] != id_map
+    for value, fill in (constant or {}).items():
+        near_edge = slow & (id_map == value)
+        out[near_edge] = fill
+        slow &= ~near_edge
     py, px = np.nonzero(slow)
     if len(py):
         out[py, px] = local_poly_fit(pattern, grid_ids, grid_values, py, px, id_map[py, px])
@@ -269,14 +277,20 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     start = time.perf_counter()
     grid_shape = pattern.grid_shape + (3,)
     albedo = safe_albedo(trace.albedo)
+    background = sample_ids == 0
+    constant = {}
+    if background.any() and not trace.radiance[background].any():
+        constant[0] = 0.0  # a black background is filled, never interpolated
+        stats["skipped_background"] += 1
     if _albedo_constant_per_id(sample_ids, albedo):
         stats["skipped_albedo_division"] += 1
         values = trace.radiance.astype(np.float32).reshape(grid_shape)
-        image, edge_pixels = interpolate_within_ids(pattern, grid_ids, values, id_map)
+        image, edge_pixels = interpolate_within_ids(pattern, grid_ids, values, id_map, constant)
     else:
         both = np.concatenate([trace.radiance / albedo, albedo], axis=1)
         interp, edge_pixels = interpolate_within_ids(
-            pattern, grid_ids, both.astype(np.float32).reshape(pattern.grid_shape + (6,)), id_map)
+            pattern, grid_ids, both.astype(np.float32).reshape(pattern.grid_shape + (6,)), id_map,
+            constant)
         image = interp[..., :3] * interp[..., 3:]
     image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(grid_shape)
     stats["edge_pixels"] = int(edge_pixels)

@@ -30,9 +30,10 @@ class InterpolationResult:
     values : ndarray, shape (height, width, channels)
         Interpolated values at every pixel (known pixels included).
     counts : Counter
-        How each region was handled: ``rbf``, ``constant`` (all samples
-        equal, or one sample), ``no_samples`` (an id that no sample carries,
-        filled from the nearest sample of any id).
+        How each region was handled: ``rbf``; ``skipped_constant_ids`` (all
+        samples equal, or one sample: filled, not interpolated), of which
+        ``skipped_background`` (the background, id 0); ``no_samples`` (an
+        id that no sample carries, filled from the nearest sample of any id).
     centres : dict
         Number of RBF centres used per id.
     """
@@ -161,7 +162,9 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
         values = sample_values[members]
         if len(members) == 1 or _is_constant(values):
             out[pixels] = values.mean(axis=0)
-            result.counts["constant"] += 1
+            result.counts["skipped_constant_ids"] += 1
+            if region == 0:
+                result.counts["skipped_background"] += 1
             continue
         xy = sample_xy[members].astype(np.float64)
         chosen = select_centres(xy, values.mean(axis=1), max_inpoints, num_cappoints)

@@ -103,6 +103,9 @@ class SparseTrace:
         ``stratified`` takes the next square power of two).
     seconds : float
         Wall time of the trace, kernel compilation included.
+    shadow_rays : bool
+        False when light visibility was known without shadow rays (no
+        point or spot light, or a single sphere or planar shape).
     """
 
     radiance: np.ndarray
@@ -112,6 +115,7 @@ class SparseTrace:
     num_lights: int
     spp: int
     seconds: float
+    shadow_rays: bool = True
 
 
 @dataclass
@@ -155,9 +159,14 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
     sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
                             params.rule_for("paper"))
     timings = {}
+    stats = Counter()
     start = time.perf_counter()
-    ids = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))
-    ids = smooth_ids(ids, params.filter_sigma, params.filter_cutoff)
+    if np.all(sample_ids == sample_ids[0]):
+        ids = np.full((pattern.height, pattern.width), sample_ids[0], dtype=np.int64)
+        stats["skipped_edge_finding"] += 1
+    else:
+        ids = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))
+        ids = smooth_ids(ids, params.filter_sigma, params.filter_cutoff)
     timings["edges"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -168,7 +177,7 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
     image = compose(interp.values, region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo),
                     pattern.mask, trace.radiance)
     timings["interpolate"] = time.perf_counter() - start
-    stats = Counter(interp.counts)
+    stats.update(interp.counts)
     stats["regions"] = int(len(np.unique(ids)))
     return Reconstruction(image, ids, pattern.mask, timings, stats)
 

@@ -59,7 +59,26 @@ def _camera_ray(sensor, sampler, pixel, spp: int, centre: bool = False):
     return ray, weight
 
 
-def _surface_aovs(scene, ray, lights):
+def shadow_rule(scene: mi.Scene, lights: list) -> str:
+    """How light visibility is found: ``rays``, or without shadow rays.
+
+    ``none`` (no point or spot light), ``facing`` (a single sphere: a point
+    sees a light exactly when it faces it, as a shadow ray would find) or
+    ``always`` (a single planar shape never blocks a light from itself).
+    """
+    if not lights:
+        return "none"
+    shapes = scene.shapes()
+    if len(shapes) == 1:
+        kind = shapes[0].shape_type()
+        if kind == int(mi.ShapeType.Sphere):
+            return "facing"
+        if kind in (int(mi.ShapeType.Rectangle), int(mi.ShapeType.Disk)):
+            return "always"
+    return "rays"
+
+
+def _surface_aovs(scene, ray, lights, rule="rays"):
     """(valid, albedo, visible-light bit mask) at the first hit of ``ray``."""
     si = scene.ray_intersect(ray)
     valid = si.is_valid()
@@ -72,7 +91,12 @@ def _surface_aovs(scene, ray, lights):
         if not (_is_jit() or valid):
             break
         ds, spec = light.sample_direction(si, mi.Point2f(0.5, 0.5), valid)
-        blocked = scene.ray_test(si.spawn_ray_to(ds.p), valid)
+        if rule == "rays":
+            blocked = scene.ray_test(si.spawn_ray_to(ds.p), valid)
+        elif rule == "facing":
+            blocked = dr.dot(si.n, ds.d) <= 0.0
+        else:
+            blocked = mi.Bool(False) if _is_jit() else False
         lit = valid & (~blocked if _is_jit() else not blocked) & (dr.max(spec) > 0.0)
         mask |= dr.select(lit, mi.UInt32(1 << k), mi.UInt32(0))
     return si, valid, albedo, mask
@@ -134,17 +158,19 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     start = time.perf_counter()
     lights = tracked_lights(scene)
     lookup = _shape_lookup(scene)
+    rule = shadow_rule(scene, lights)
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     spp = sampler.sample_count()
     trace = (_trace_jit if _is_jit() else _trace_scalar)(
-        scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs)
+        scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs, rule)
     radiance, albedo, shape_index, visible = trace
     return SparseTrace(radiance, albedo, shape_index, visible, len(lights), spp,
-                       time.perf_counter() - start)
+                       time.perf_counter() - start, shadow_rays=rule == "rays")
 
 
-def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs):
+def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,
+               rule):
     n = len(pixel_xy)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
@@ -165,7 +191,7 @@ def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, 
         return radiance, np.zeros((n, 3)), np.zeros(n, np.int64), np.zeros(n, np.uint32)
 
     ray, _ = _camera_ray(sensor, sampler, mi.Point2f(columns, rows), 1, centre=True)
-    si, valid, albedo, mask = _surface_aovs(scene, ray, lights)
+    si, valid, albedo, mask = _surface_aovs(scene, ray, lights, rule)
     pointers = dr.reinterpret_array(mi.UInt32, si.shape)
     dr.eval(albedo, mask, pointers)
     keys, indices = lookup
@@ -177,7 +203,8 @@ def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, 
             _to_numpy(mask, n).astype(np.uint32))
 
 
-def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs):
+def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,
+                  rule):
     n = len(pixel_xy)
     radiance = np.zeros((n, 3))
     albedo = np.zeros((n, 3))
@@ -194,7 +221,7 @@ def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, light
         if not aovs:
             continue
         ray, _ = _camera_ray(sensor, sampler, pixel, 1, centre=True)
-        si, valid, alb, mask = _surface_aovs(scene, ray, lights)
+        si, valid, alb, mask = _surface_aovs(scene, ray, lights, rule)
         if valid:
             albedo[k] = np.asarray(alb, dtype=np.float64)
             shape_index[k] = lookup.get(id(si.shape), 0)
