@@ -188,7 +188,7 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     weighted = (basis * w[:, :, None]).transpose(0, 2, 1)        # (g, 6, 16)
     normal = weighted @ basis                                     # (g, 6, 6)
     rhs = weighted @ grid_values[gy, gx].reshape(g, 16, -1)       # (g, 6, C)
-    total = normal[:, 0, 0]
+    total = normal[:, 0, 0].copy()  # a copy: the ridge below changes normal
     normal += (_RIDGE[None, :] * (total[:, None] + 1e-300))[:, :, None] * np.eye(6)[None]
     empty = total <= 0.0
     normal[empty] = np.eye(6)
