@@ -18,7 +18,7 @@ from __future__ import annotations
 import importlib
 
 from .errors import MRTError
-from . import baselines, fast, refine  # noqa: F401  (register the modes beyond paper)
+from . import baselines, fast, idpass, refine  # noqa: F401  (register the modes beyond paper)
 from .pipeline import MODES, MRTParams, Reconstruction, SparseTrace, reconstruct
 from .sampling import SamplePattern, grid_pattern
 

@@ -21,7 +21,6 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import MRTError
-from .ids import encode_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, reconstruct
 from .sampling import SamplePattern, grid_pattern
 from .trace import trace_pixels
@@ -148,8 +147,9 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     width, height = (int(v) for v in sensor.film().crop_size())
     pattern = grid_pattern(width, height, params.sample_fraction)
 
-    def tracer(pixel_xy, seed_offset=1, aovs=True):
-        return trace_pixels(scene, sensor, nested, pixel_xy, spp, seed + seed_offset, aovs)
+    def tracer(pixel_xy, seed_offset=1, aovs=True, radiance=True):
+        return trace_pixels(scene, sensor, nested, pixel_xy, spp, seed + seed_offset, aovs,
+                            radiance)
 
     if mode == "auto":
         decision = _auto_decide(pattern, tracer, spp)
@@ -242,8 +242,7 @@ def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, de
             raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
                            f"{int(bad.sum())} pixels")
         sub = SamplePattern(width, height, pattern.rows[pilot_rows], pattern.cols)
-        ids = sub.nearest_image(encode_ids(pilot.shape_index, pilot.visible_lights,
-                                           pilot.num_lights, params.rule_for("fast")))
+        ids = sub.nearest_image(pilot.ids(params.rule_for("fast")))
         trace_s = pilot.seconds
     timings = {"trace": trace_s, "edges": 0.0, "interpolate": 0.0, "full_render": seconds,
                "total": time.perf_counter() - start}

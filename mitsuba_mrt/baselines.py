@@ -14,7 +14,6 @@ from collections import Counter
 import numpy as np
 from scipy.interpolate import RectBivariateSpline
 
-from .ids import encode_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
 
@@ -66,8 +65,7 @@ def _baseline(upsample):
         image = upsample(pattern, trace.radiance)
         image[pattern.mask] = trace.radiance
         seconds = time.perf_counter() - start
-        sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                                params.rule_for("nearest"))
+        sample_ids = trace.ids(params.rule_for("nearest"))
         ids = pattern.nearest_image(sample_ids)
         return Reconstruction(image, ids, pattern.mask, {"edges": 0.0, "interpolate": seconds},
                               Counter(regions=int(len(np.unique(ids)))))

@@ -29,7 +29,6 @@ from scipy import sparse
 
 from .compose import ALBEDO_EPS, safe_albedo
 from .edges import smooth_ids
-from .ids import encode_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
 
@@ -262,8 +261,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     """
     stats = Counter()
     start = time.perf_counter()
-    sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            params.rule_for("fast"))
+    sample_ids = trace.ids(params.rule_for("fast"))
     grid_ids = sample_ids.reshape(pattern.grid_shape)
     id_map = pattern.nearest_image(grid_ids)
     stats["regions"] = int(len(np.unique(sample_ids)))

@@ -106,6 +106,9 @@ class SparseTrace:
     shadow_rays : bool
         False when light visibility was known without shadow rays (no
         point or spot light, or a single sphere or planar shape).
+    path_id : ndarray of int64, shape (n,), optional
+        The chain of shapes met along specular (mirror) bounces, encoded
+        as one integer (equal to ``shape_index`` without mirrors).
     """
 
     radiance: np.ndarray
@@ -116,6 +119,17 @@ class SparseTrace:
     spp: int
     seconds: float
     shadow_rays: bool = True
+    path_id: np.ndarray | None = None
+
+    def ids(self, rule: str) -> np.ndarray:
+        """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.ids`).
+
+        The exact rule labels a pixel that sees a mirror by the chain of
+        shapes along its specular path (``path_id``); the paper rule, like
+        the report, by the first shape hit.
+        """
+        shapes = self.shape_index if rule == "paper" or self.path_id is None else self.path_id
+        return encode_ids(shapes, self.visible_lights, self.num_lights, rule)
 
 
 @dataclass
@@ -156,8 +170,7 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
     tracer : callable, optional
         Unused: this mode traces nothing beyond the grid.
     """
-    sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            params.rule_for("paper"))
+    sample_ids = trace.ids(params.rule_for("paper"))
     timings = {}
     stats = Counter()
     start = time.perf_counter()
@@ -205,8 +218,9 @@ def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = 
     mode : str
         A key of :data:`MODES` (``paper``, ``nearest``, ``bicubic``, ...).
     tracer : callable, optional
-        ``tracer(pixel_xy) -> SparseTrace`` traces more pixels with the
-        nested integrator, for modes that refine.
+        ``tracer(pixel_xy, seed_offset=1, aovs=True, radiance=True) ->
+        SparseTrace`` traces more pixels (with the nested integrator when
+        ``radiance``, with the id AOVs when ``aovs``), for modes that refine.
 
     Examples
     --------

@@ -8,6 +8,7 @@ import numpy as np
 
 from .errors import MRTError
 from .pipeline import MRTParams
+from .trace import has_mirrors
 
 #: The variant whose classes this module defines (it is reloaded on a switch).
 VARIANT = mi.variant()
@@ -19,16 +20,6 @@ def _jit() -> bool:
 
 def _not(mask):
     return ~mask if _jit() else not mask
-
-
-def has_mirrors(scene: mi.Scene) -> bool:
-    """True if a shape of ``scene`` has a purely specular (delta) BSDF."""
-    for shape in scene.shapes():
-        bsdf = shape.bsdf()
-        flags = int(bsdf.flags()) if bsdf is not None else 0
-        if mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth):
-            return True
-    return False
 
 
 class MatteIntegrator(mi.SamplingIntegrator):
@@ -209,11 +200,9 @@ def aov_images(result) -> dict[str, np.ndarray]:
     the region's id among the image's ids under the exact rule.
     """
     from .compose import region_values
-    from .ids import encode_ids
 
     trace, ids = result.trace, result.ids
-    sample_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                            result.params.rule_for(result.mode))
+    sample_ids = trace.ids(result.params.rule_for(result.mode))
     if result.params.rule_for(result.mode) == "paper":
         id_image = ids / 2.0
     else:

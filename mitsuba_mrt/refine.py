@@ -20,7 +20,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .fast import interpolate_within_ids
-from .ids import encode_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
 
@@ -111,14 +110,13 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     rule = params.rule_for("refine")
     stats = Counter()
     start = time.perf_counter()
-    grid_ids = encode_ids(trace.shape_index, trace.visible_lights, trace.num_lights,
-                          rule).reshape(pattern.grid_shape)
+    grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     extra = []
 
     def trace_ids(points):
         more = tracer(points)
         extra.append((points, more))
-        return encode_ids(more.shape_index, more.visible_lights, more.num_lights, rule)
+        return more.ids(rule)
 
     refined, _ = refine_edges(pattern, grid_ids, trace_ids)
     trace_s = sum(more.seconds for _, more in extra)
@@ -141,8 +139,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
         image[xy[:, 1], xy[:, 0]] = radiance
         traced_mask[xy[:, 1], xy[:, 0]] = True
         _fix_orphans(image, id_map, traced_mask, grid_ids, pattern, xy,
-                     np.concatenate([encode_ids(m.shape_index, m.visible_lights, m.num_lights,
-                                                rule) for _, m in extra]), radiance)
+                     np.concatenate([m.ids(rule) for _, m in extra]), radiance)
     image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(pattern.grid_shape + (3,))
     stats["regions"] = int(len(np.unique(id_map)))
     stats["edge_pixels"] = int(edge_pixels)

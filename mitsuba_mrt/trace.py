@@ -22,6 +22,60 @@ from .pipeline import SparseTrace
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32
+#: Specular (mirror) bounces followed by the id trace.
+MIRROR_DEPTH = 4
+
+
+def has_mirrors(scene: mi.Scene) -> bool:
+    """True if a shape of ``scene`` has a purely specular (delta) BSDF."""
+    for shape in scene.shapes():
+        bsdf = shape.bsdf()
+        flags = int(bsdf.flags()) if bsdf is not None else 0
+        if mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth):
+            return True
+    return False
+
+
+def _is_mirror(bsdf, valid):
+    flags = bsdf.flags()
+    delta = mi.has_flag(flags, mi.BSDFFlags.Delta)
+    smooth = mi.has_flag(flags, mi.BSDFFlags.Smooth)
+    if _is_jit():
+        return valid & delta & ~smooth
+    return bool(valid and delta and not smooth)
+
+
+def _follow_mirrors(scene, ray, si, valid):
+    """Follow specular bounces from the first hit.
+
+    Returns the final (non-mirror) hit, its validity, the specular
+    throughput, and per bounce (bounced, shape pointer or object).
+    """
+    ctx = mi.BSDFContext()
+    throughput = mi.Color3f(1.0)
+    chain = []
+    ray = mi.Ray3f(ray)
+    for _ in range(MIRROR_DEPTH):
+        if not _is_jit() and not valid:
+            break
+        mirror = _is_mirror(si.bsdf(ray), valid)
+        if not _is_jit() and not mirror:
+            break
+        bs, weight = si.bsdf(ray).sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
+        new_ray = si.spawn_ray(si.to_world(bs.wo))
+        new_si = scene.ray_intersect(new_ray, mirror)
+        if _is_jit():
+            throughput = dr.select(mirror, throughput * weight, throughput)
+            chain.append((mirror, dr.select(mirror, dr.reinterpret_array(mi.UInt32, new_si.shape),
+                                            mi.UInt32(0))))
+            ray = dr.select(mirror, new_ray, ray)
+            si = dr.select(mirror, new_si, si)
+            valid = dr.select(mirror, new_si.is_valid(), valid)
+        else:
+            throughput = throughput * weight
+            chain.append((True, new_si.shape if new_si.is_valid() else None))
+            ray, si, valid = new_ray, new_si, bool(new_si.is_valid())
+    return ray, si, valid, throughput, chain
 
 
 def tracked_lights(scene: mi.Scene) -> list:
@@ -78,14 +132,24 @@ def shadow_rule(scene: mi.Scene, lights: list) -> str:
     return "rays"
 
 
-def _surface_aovs(scene, ray, lights, rule="rays"):
-    """(valid, albedo, visible-light bit mask) at the first hit of ``ray``."""
-    si = scene.ray_intersect(ray)
-    valid = si.is_valid()
+def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
+    """The id AOVs of the first hit of ``ray``.
+
+    Returns (first hit, its validity, albedo, visible-light bit mask,
+    mirror chain).  With ``mirrors``, specular bounces are followed first:
+    albedo and light visibility are those of the final hit (the albedo
+    times the mirrors' reflectance), and the chain lists the bounces.
+    """
+    first = si = scene.ray_intersect(ray)
+    first_valid = valid = si.is_valid()
+    chain = []
+    throughput = mi.Color3f(1.0)
+    if mirrors:
+        ray, si, valid, throughput, chain = _follow_mirrors(scene, ray, si, valid)
     bsdf = si.bsdf(ray)
     albedo = bsdf.eval_diffuse_reflectance(si, valid) if (_is_jit() or valid) \
         else mi.Color3f(0.0)
-    albedo = dr.select(valid, albedo, 0.0)
+    albedo = dr.select(valid, throughput * albedo, 0.0)
     mask = mi.UInt32(0)
     for k, light in enumerate(lights):
         if not (_is_jit() or valid):
@@ -99,7 +163,22 @@ def _surface_aovs(scene, ray, lights, rule="rays"):
             blocked = mi.Bool(False) if _is_jit() else False
         lit = valid & (~blocked if _is_jit() else not blocked) & (dr.max(spec) > 0.0)
         mask |= dr.select(lit, mi.UInt32(1 << k), mi.UInt32(0))
-    return si, valid, albedo, mask
+    return first, first_valid, albedo, mask, chain
+
+
+def _path_ids(shape_index: np.ndarray, steps: list, num_shapes: int) -> np.ndarray:
+    """One integer per pixel for the chain of shapes along its mirror bounces.
+
+    Each step is 0 (no bounce), a 1-based shape index, or ``num_shapes + 1``
+    (reflected into the background); the digits are combined in base
+    ``num_shapes + 2``, folded into 31 bits by a hash when they do not fit.
+    """
+    path = shape_index.astype(np.int64).copy()
+    base = num_shapes + 2
+    fits = base ** (len(steps) + 1) < (1 << 31)
+    for step in steps:
+        path = path * base + step if fits else (path * 1000003 + step) % ((1 << 31) - 1)
+    return path
 
 
 def _natural_key(text: str):
@@ -131,7 +210,8 @@ def _shape_lookup(scene: mi.Scene):
 
 
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
-                 pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True) -> SparseTrace:
+                 pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
+                 radiance: bool = True) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -148,6 +228,9 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     aovs : bool
         Also trace the id AOVs (albedo, shape, visible lights); without
         them those fields are zero and only the radiance costs time.
+    radiance : bool
+        Run the nested integrator; without it the radiance is zero and only
+        the id AOVs cost time (the MRT's cheap full-resolution id pass).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -163,10 +246,11 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     sampler.set_sample_count(spp)
     spp = sampler.sample_count()
     trace = (_trace_jit if _is_jit() else _trace_scalar)(
-        scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs, rule)
-    radiance, albedo, shape_index, visible = trace
+        scene, sensor, integrator if radiance else None, sampler, pixel_xy, spp, seed, lights,
+        lookup, aovs, rule)
+    radiance, albedo, shape_index, visible, path_id = trace
     return SparseTrace(radiance, albedo, shape_index, visible, len(lights), spp,
-                       time.perf_counter() - start, shadow_rays=rule == "rays")
+                       time.perf_counter() - start, shadow_rays=rule == "rays", path_id=path_id)
 
 
 def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,
@@ -175,32 +259,44 @@ def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, 
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
     columns, rows = mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1])
-    if spp == 1:
+    if integrator is None:
+        radiance = np.zeros((n, 3))
+    elif spp == 1:
         pixel = mi.Point2f(columns, rows)
     else:  # lanes pixel-major, as Mitsuba's own render loop lays them out
         owner = dr.arange(mi.UInt32, n * spp) // spp
         pixel = mi.Point2f(dr.gather(mi.Float, columns, owner), dr.gather(mi.Float, rows, owner))
-    ray, weight = _camera_ray(sensor, sampler, pixel, spp)
-    radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
-    radiance = mi.Color3f(weight * radiance)
-    if spp > 1:
-        radiance = dr.block_sum(radiance, spp) / spp
-    dr.eval(radiance)
-    radiance = _to_numpy(radiance, n)
+    if integrator is not None:
+        ray, weight = _camera_ray(sensor, sampler, pixel, spp)
+        radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
+        radiance = mi.Color3f(weight * radiance)
+        if spp > 1:
+            radiance = dr.block_sum(radiance, spp) / spp
+        dr.eval(radiance)
+        radiance = _to_numpy(radiance, n)
     if not aovs:
-        return radiance, np.zeros((n, 3)), np.zeros(n, np.int64), np.zeros(n, np.uint32)
+        zero = np.zeros(n, np.int64)
+        return radiance, np.zeros((n, 3)), zero, np.zeros(n, np.uint32), zero
 
     ray, _ = _camera_ray(sensor, sampler, mi.Point2f(columns, rows), 1, centre=True)
-    si, valid, albedo, mask = _surface_aovs(scene, ray, lights, rule)
+    si, valid, albedo, mask, chain = _surface_aovs(scene, ray, lights, rule, has_mirrors(scene))
     pointers = dr.reinterpret_array(mi.UInt32, si.shape)
-    dr.eval(albedo, mask, pointers)
+    dr.eval(albedo, mask, pointers, chain)
     keys, indices = lookup
-    pointers = _to_numpy(pointers, n).astype(np.int64)
-    pos = np.clip(np.searchsorted(keys, pointers), 0, max(len(keys) - 1, 0))
-    hit = (len(keys) > 0) & (keys[pos] == pointers) if len(keys) else np.zeros(n, bool)
-    shape_index = np.where(hit, indices[pos] if len(keys) else 0, 0).astype(np.int64)
+
+    def to_index(ptr):
+        ptr = _to_numpy(ptr, n).astype(np.int64)
+        if not len(keys):
+            return np.zeros(n, dtype=np.int64)
+        pos = np.clip(np.searchsorted(keys, ptr), 0, len(keys) - 1)
+        return np.where(keys[pos] == ptr, indices[pos], 0).astype(np.int64)
+
+    shape_index = to_index(pointers)
+    steps = [np.where(_to_numpy(bounced, n).astype(bool),
+                      np.where(to_index(ptr) > 0, to_index(ptr), len(keys) + 1), 0)
+             for bounced, ptr in chain]
     return (radiance, _to_numpy(albedo, n), shape_index,
-            _to_numpy(mask, n).astype(np.uint32))
+            _to_numpy(mask, n).astype(np.uint32), _path_ids(shape_index, steps, len(keys)))
 
 
 def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,
@@ -210,10 +306,12 @@ def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, light
     albedo = np.zeros((n, 3))
     shape_index = np.zeros(n, dtype=np.int64)
     visible = np.zeros(n, dtype=np.uint32)
+    mirrors = has_mirrors(scene)
+    steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
     for k, (x, y) in enumerate(pixel_xy.tolist()):
         sampler.seed(seed * 0x9E3779B1 + k)
         pixel = mi.Point2f(x, y)
-        for _ in range(spp):
+        for _ in range(spp if integrator is not None else 0):
             ray, weight = _camera_ray(sensor, sampler, pixel, spp)
             value, _, _ = integrator.sample(scene, sampler, ray, None, True)
             radiance[k] += np.asarray(weight * value, dtype=np.float64)
@@ -221,9 +319,12 @@ def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, light
         if not aovs:
             continue
         ray, _ = _camera_ray(sensor, sampler, pixel, 1, centre=True)
-        si, valid, alb, mask = _surface_aovs(scene, ray, lights, rule)
+        si, valid, alb, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
         if valid:
             albedo[k] = np.asarray(alb, dtype=np.float64)
             shape_index[k] = lookup.get(id(si.shape), 0)
             visible[k] = int(mask)
-    return radiance / spp, albedo, shape_index, visible
+            for b, (_, shape) in enumerate(chain):
+                steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
+    return (radiance / spp, albedo, shape_index, visible,
+            _path_ids(shape_index, steps, len(lookup)))

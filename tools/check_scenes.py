@@ -9,7 +9,7 @@ built from the same scene tables (``make_scenes.scene_specs``):
 1. the scene loads and its ``direct`` render has no NaN or Inf;
 2. geometry and orientation: the shape seen at every pixel (Mitsuba's
    ``aov`` integrator, ``shape_index``, mapped back to the shape ids
-   ``sphere_<n>`` / ``plane_<n>``) equals the first object hit by the
+   ``obj_<n>_sphere`` / ``obj_<n>_plane``) equals the first object hit by the
    report's camera ray of pixel ``(i, j) = (c, res - 1 - r)``, for at least
    99.5 % of the pixels and for every pixel away from silhouettes, at the
    check resolution and at the scene's default one;
@@ -220,7 +220,7 @@ def mitsuba_ids(scene):
     regs = np.array(dr.reinterpret_array(mi.UInt32, scene.shapes_dr()))
     lut = {0: -1}
     for reg, shape in zip(regs, scene.shapes()):
-        lut[int(reg)] = int(shape.id().rsplit("_", 1)[1])
+        lut[int(reg)] = int(shape.id().split("_")[1])  # obj_<k>_<kind>
     return np.vectorize(lambda v: lut.get(int(v), -2))(raw)
 
 
@@ -398,7 +398,7 @@ def mirror_study(res=400, out_dir=Path("/tmp")):
 
 def ms_id(spec, k):
     """Return the shape id of object ``k`` (``sphere_<k>`` or ``plane_<k>``)."""
-    return f"sphere_{k}" if k < len(spec["spheres"]) else f"plane_{k}"
+    return f"obj_{k}_sphere" if k < len(spec["spheres"]) else f"obj_{k}_plane"
 
 
 def main():

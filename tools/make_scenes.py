@@ -20,7 +20,9 @@ behind the report's figures).  Every file follows the same conventions:
   of a diffuse rectangle is black, i.e. one-sided).
 * A light of strength ``k`` is a ``point`` emitter of intensity ``pi * k``
   (the diffuse BSDF's ``1 / pi`` is absent from the report's formula).
-* Shapes carry ids ``sphere_<n>`` / ``plane_<n>`` numbered in table order,
+* Shapes carry ids ``obj_<n>_sphere`` / ``obj_<n>_plane`` numbered in table order
+  (so that mitsuba_mrt, which numbers shapes by natural sort of their ids,
+  numbers them as the report does),
   spheres first.
 
 The output is deterministic: running the script twice gives the same bytes.
@@ -300,7 +302,7 @@ def shapes(spheres, planes, half_size, lines, mirror=None):
     """
     n = 0
     for b, (centre, radius, colour) in enumerate(spheres):
-        lines += ["", f'    <shape type="sphere" id="sphere_{n}">']
+        lines += ["", f'    <shape type="sphere" id="obj_{n}_sphere">']
         lines += [
             f'        <point name="center" value="{fmt3(centre)}"/>',
             f'        <float name="radius" value="{fmt(radius)}"/>',
@@ -329,7 +331,7 @@ def shapes(spheres, planes, half_size, lines, mirror=None):
             f" ({fmt3(np.round(nrm, 6))}).",
             f"         A {fmt(2 * half_size)} x {fmt(2 * half_size)} rectangle;"
             " lookat turns its +z normal towards target - origin. -->",
-            f'    <shape type="rectangle" id="plane_{n}">',
+            f'    <shape type="rectangle" id="obj_{n}_plane">',
             '        <transform name="to_world">',
             f'            <scale value="{fmt(half_size)}"/>',
             f'            <lookat origin="{fmt3(point)}" target="{fmt3(target)}"'
