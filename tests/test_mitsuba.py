@@ -201,7 +201,7 @@ def test_auto_renders_small_jobs_in_full_without_a_pilot(variant):
     assert np.allclose(result.image, reference)
 
 
-@pytest.mark.parametrize("margin,used", [(0.0, "full"), (1e9, "fast")])
+@pytest.mark.parametrize("margin,used", [(0.0, "full"), (1e9, "mrt")])
 def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch, margin, used):
     import mitsuba_mrt.api as api
 
@@ -209,10 +209,16 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
     scene = mi.load_string(small_scene_xml(512))  # 2^18 samples: large enough for a pilot
     result = mitsuba_mrt.render(scene)
     reference, _ = mitsuba_mrt.render_reference(scene)
-    assert result.stats["mode_used"] == used and result.stats["auto_reason"] == "pilot"
+    assert result.stats["auto_reason"] == "pilot"
+    if used == "mrt":
+        assert result.stats["mode_used"] in ("refine", "idpass")
+        assert result.stats["predicted_mrt_s"] == min(result.stats["predicted_refine_s"],
+                                                      result.stats["predicted_idpass_s"])
+    else:
+        assert result.stats["mode_used"] == "full"
     assert result.stats["predicted_full_s"] > 0 and result.stats["predicted_mrt_s"] > 0
     if used == "full":  # the pilot's band is kept; matte is deterministic
         assert np.allclose(result.image, reference, atol=1e-6)
     else:
-        assert result.traced_mask.sum() == grid_pattern(512, 512, 0.1).count
-        assert paper_error(result.image, reference) < 0.01
+        assert result.traced_mask.sum() >= grid_pattern(512, 512, 0.1).count
+        assert paper_error(result.image, reference) < 0.002
