@@ -21,7 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from .errors import MRTError
-from .pipeline import MRTParams, Reconstruction, SparseTrace, reconstruct
+from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, reconstruct
 from .sampling import SamplePattern, grid_pattern
 from .trace import trace_pixels
 
@@ -251,10 +251,7 @@ def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, de
         rest = tracer(rest_xy, 1, False)
         image = np.concatenate([band.radiance, rest.radiance]).reshape(height, width, 3)
         seconds = band.seconds + rest.seconds
-        bad = ~np.isfinite(image).all(axis=-1)
-        if bad.any():
-            raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
-                           f"{int(bad.sum())} pixels")
+        check_radiance(image, "pixels")
         sub = SamplePattern(width, height, pattern.rows[pilot_rows], pattern.cols)
         ids = sub.nearest_image(pilot.ids(params.rule_for("fast")))
         trace_s = pilot.seconds

@@ -275,11 +275,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     start = time.perf_counter()
     grid_shape = pattern.grid_shape + (3,)
     albedo = safe_albedo(trace.albedo)
-    background = sample_ids == 0
-    constant = {}
-    if background.any() and not trace.radiance[background].any():
-        constant[0] = 0.0  # a black background is filled, never interpolated
-        stats["skipped_background"] += 1
+    constant = black_background(sample_ids, trace.radiance, stats)
     if _albedo_constant_per_id(sample_ids, albedo):
         stats["skipped_albedo_division"] += 1
         values = trace.radiance.astype(np.float32).reshape(grid_shape)
@@ -294,6 +290,16 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     stats["edge_pixels"] = int(edge_pixels)
     return Reconstruction(image, id_map, pattern.mask,
                           {"edges": edges_s, "interpolate": time.perf_counter() - start}, stats)
+
+
+def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter) -> dict:
+    """``{0: 0.0}`` when every background sample is black (it is then filled,
+    never interpolated; counted in ``stats``), else ``{}``."""
+    background = sample_ids == 0
+    if background.any() and not radiance[background].any():
+        stats["skipped_background"] += 1
+        return {0: 0.0}
+    return {}
 
 
 def _albedo_constant_per_id(sample_ids: np.ndarray, albedo: np.ndarray) -> bool:

@@ -19,8 +19,8 @@ import numpy as np
 
 from .compose import safe_albedo
 from .errors import MRTError
-from .fast import cell_coordinates, interpolate_within_ids
-from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
+from .fast import black_background, cell_coordinates, interpolate_within_ids
+from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, register_mode
 from .sampling import SamplePattern
 
 
@@ -71,19 +71,14 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
 
     start = time.perf_counter()
     irradiance = trace.radiance / safe_albedo(trace.albedo)
-    background = grid_ids.ravel() == 0
-    constant = {0: 0.0} if background.any() and not trace.radiance[background].any() else {}
-    if constant:
-        stats["skipped_background"] += 1
+    constant = black_background(grid_ids.ravel(), trace.radiance, stats)
     interp, edge_pixels = interpolate_within_ids(
         pattern, grid_ids, irradiance.astype(np.float32).reshape(pattern.grid_shape + (3,)),
         id_map, constant)
     image = interp * albedo
     traced_mask = pattern.mask.copy()
     if extra is not None:
-        if not np.isfinite(extra.radiance).all():
-            raise MRTError("the nested integrator returned NaN or Inf radiance at "
-                           "pixels traced for thin regions")
+        check_radiance(extra.radiance, "pixels traced for thin regions")
         image[extra_xy[:, 1], extra_xy[:, 0]] = extra.radiance
         traced_mask[extra_xy[:, 1], extra_xy[:, 0]] = True
     image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(pattern.grid_shape + (3,))

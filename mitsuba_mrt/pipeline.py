@@ -156,6 +156,14 @@ class Reconstruction:
     stats: Counter = field(default_factory=Counter)
 
 
+def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
+    """Raise MRTError, naming how many, if any pixel's radiance is NaN or Inf."""
+    bad = ~np.isfinite(radiance).all(axis=-1)
+    if bad.any():
+        raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
+                       f"{int(bad.sum())} of {bad.size} {where}")
+
+
 def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
                       tracer=None) -> Reconstruction:
     """The report's reconstruction (Algorithms 2 and 3), mode ``paper``.
@@ -239,8 +247,5 @@ def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = 
               trace.visible_lights.shape)
     if shapes != ((n, 3), (n, 3), (n,), (n,)):
         raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
-    bad = ~np.isfinite(trace.radiance).all(axis=1)
-    if bad.any():
-        raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
-                       f"{int(bad.sum())} of {n} traced pixels")
+    check_radiance(trace.radiance)
     return MODES[mode](pattern, trace, params, tracer)

@@ -20,7 +20,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .fast import interpolate_within_ids
-from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
+from .errors import MRTError
+from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, register_mode
 from .sampling import SamplePattern
 
 
@@ -106,7 +107,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
                        tracer=None) -> Reconstruction:
     """Grid trace + adaptive edge refinement + within-id interpolation (mode ``refine``)."""
     if tracer is None:
-        raise ValueError("mode 'refine' needs a tracer to trace edge pixels")
+        raise MRTError("mode 'refine' needs a tracer to trace edge pixels")
     rule = params.rule_for("refine")
     stats = Counter()
     start = time.perf_counter()
@@ -130,12 +131,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     if extra:
         xy = np.concatenate([p for p, _ in extra])
         radiance = np.concatenate([m.radiance for _, m in extra])
-        bad = ~np.isfinite(radiance).all(axis=1)
-        if bad.any():
-            from .errors import MRTError
-
-            raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
-                           f"{int(bad.sum())} refined pixels")
+        check_radiance(radiance, "refined pixels")
         image[xy[:, 1], xy[:, 0]] = radiance
         traced_mask[xy[:, 1], xy[:, 0]] = True
         _fix_orphans(image, id_map, traced_mask, grid_ids, pattern, xy,
