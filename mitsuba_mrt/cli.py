@@ -39,8 +39,9 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
                    help="most RBF centres per id (default %(default)s)")
     g.add_argument("--num-cappoints", type=int, default=d.num_cappoints,
                    help="brightest and darkest capstones per id (default %(default)s)")
-    g.add_argument("--id-rule", choices=("paper", "exact"), default=d.id_rule,
-                   help="paper: shape + 0.5 per blocked light; exact: never collides")
+    g.add_argument("--id-rule", choices=("auto", "paper", "exact"), default=d.id_rule,
+                   help="paper: shape + 0.5 per blocked light; exact: never collides; "
+                        "auto (default): paper in mode paper, exact elsewhere")
     g.add_argument("--rbf-degree", type=int, choices=(-1, 0, 1), default=d.rbf_degree,
                    help="polynomial added to the linear RBF; -1 is the report's")
 
@@ -48,7 +49,7 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
 def _modes() -> list[str]:
     from . import MODES
 
-    return list(MODES)
+    return ["auto"] + list(MODES)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -68,9 +69,36 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-reference", action="store_true",
                    help="skip the full reference render (no error, no PSNR)")
     r.add_argument("--json", action="store_true", help="print the JSON summary")
-    r.add_argument("--mode", default="paper", metavar="MODE",
-                   help="reconstruction mode: " + ", ".join(_modes()) + " (default %(default)s)")
+    r.add_argument("--mode", default="auto", metavar="MODE",
+                   help="reconstruction mode: " + ", ".join(_modes())
+                        + "; auto: fast when a measured pilot says it beats a full render, "
+                          "else the full render (default %(default)s)")
     _add_mrt_options(r)
+
+    from .bench import EXPERIMENTS
+
+    b = sub.add_parser("bench", help="the report's experiments: MRT against the full render "
+                       "and the baselines (CSV, plots, markdown tables)")
+    b.add_argument("experiment", choices=(*EXPERIMENTS, "all"),
+                   help="which experiment (all: every one, into the same folder)")
+    b.add_argument("-o", "--output", default="out/bench",
+                   help="output folder (default %(default)s)")
+    b.add_argument("--quick", action="store_true",
+                   help="a reduced sweep at low resolution, repeats 1 (for tests)")
+    b.add_argument("--repeats", type=int, default=None,
+                   help="timed runs of every method per point, median reported "
+                        "(default 3; 1 with --quick)")
+    b.add_argument("--variant", choices=VARIANT_CHOICES, default="auto",
+                   help="Mitsuba variant; auto: LLVM if libLLVM >= 17, else scalar")
+    b.add_argument("--methods", default=None, metavar="A,B,...",
+                   help="comma list of methods (full, mrt-<mode>, nearest, bicubic); "
+                        "default: full and every mode; full always runs")
+    b.add_argument("--res", type=int, default=None,
+                   help="image side for every experiment but pixels "
+                        "(default 200, tradeoff 400; --quick 64)")
+    b.add_argument("--scenes", default=None, metavar="DIR",
+                   help="folder of the report's scenes (default: the repository's scenes_xml)")
+    b.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
@@ -98,10 +126,29 @@ def _render(args) -> int:
     return 0
 
 
+def _bench(args) -> int:
+    import shlex
+
+    from .bench import run_experiment, summary_line
+
+    if args.repeats is not None and args.repeats < 1:
+        raise MRTError(f"--repeats must be >= 1, got {args.repeats}")
+    command = "python -m mitsuba_mrt " + shlex.join(args.argv)
+    results = run_experiment(args.experiment, args.output, quick=args.quick,
+                             repeats=args.repeats, variant=args.variant, methods=args.methods,
+                             res=args.res, scenes_dir=args.scenes,
+                             progress=not args.no_progress, command=command)
+    for name, result in results.items():
+        print(summary_line(name, result))
+    return 0
+
+
 def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv
     try:
-        return {"render": _render}[args.command](args)
+        return {"render": _render, "bench": _bench}[args.command](args)
     except MRTError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -1,0 +1,190 @@
+"""``bench``: a quick experiment end to end, the method names, the plots (headless), errors."""
+
+import math
+
+import pytest
+
+from mitsuba_mrt import bench
+from mitsuba_mrt.cli import main
+from mitsuba_mrt.pipeline import MODES, paper_reconstruct, register_mode
+
+from conftest import SCENES
+
+#: The columns the issue asks for, by their CSV names.
+REQUIRED = ("experiment", "scene", "method", "sample_fraction", "filter_sigma", "filter_cutoff",
+            "spp", "width", "height", "traced_pixels", "trace_s", "edges_s", "interpolate_s",
+            "total_s", "reference_s", "relative_time", "error", "psnr_db", "peak_memory_mb",
+            "warmup_s", "error_converged", "variant", "mitsuba", "drjit", "cpu_count", "machine")
+
+
+@pytest.fixture(scope="module")
+def quick_fraction(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    result = bench.run_experiment("fraction", out, quick=True, progress=False,
+                                  scenes_dir=SCENES)["fraction"]
+    return out, result
+
+
+def test_quick_fraction_writes_csv_plots_and_table(quick_fraction):
+    out, result = quick_fraction
+    rows = bench.read_csv(out / "fraction.csv")
+    assert rows and set(REQUIRED) <= set(rows[0]) and tuple(rows[0]) == bench.CSV_COLUMNS
+    methods = {r["method"] for r in rows}
+    assert methods == set(bench.resolve_methods())
+    assert {"full", "mrt-paper", "nearest", "bicubic"} <= methods
+    for r in rows:
+        assert r["status"] == "ok", r["status"]
+        for column in bench.FINITE_COLUMNS:
+            assert math.isfinite(float(r[column])), (r["method"], column, r[column])
+        assert r["variant"] and r["mitsuba"] and int(r["cpu_count"]) >= 1
+        assert r["peak_memory_source"] in ("vmhwm", "tracemalloc")
+        assert float(r["peak_memory_mb"]) > 0
+        if r["method"] == "full":
+            assert float(r["relative_time"]) == 1.0 and float(r["error"]) == 0.0
+            assert int(r["traced_pixels"]) == int(r["width"]) * int(r["height"])
+        else:
+            assert math.isfinite(float(r["psnr_db"]))
+            assert 0 < int(r["traced_pixels"]) < int(r["width"]) * int(r["height"])
+            assert 0.0 < float(r["error"]) < 0.2
+            assert math.isnan(float(r["error_converged"]))  # matte is deterministic
+    fractions = {float(r["sample_fraction"]) for r in rows if r["method"] == "mrt-paper"}
+    assert fractions == {0.05, 0.1, 0.2}
+    for name in ("fraction.png", "fraction_triptych.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) < 150_000
+    md = (out / "fraction.md").read_text()
+    assert md.startswith("Command: `python -m mitsuba_mrt bench fraction")
+    assert "Mitsuba 3.9" in md and "| mrt-paper |" in md and "Relative time" in md
+    assert result["seconds"] < 60
+
+
+def test_quick_tradeoff_reports_converged_and_equal_time(tmp_path):
+    result = bench.run_experiment("tradeoff", tmp_path, quick=True, progress=False,
+                                  methods="mrt-paper,nearest", res=24,
+                                  scenes_dir=SCENES)["tradeoff"]
+    rows = result["rows"]
+    path_rows = [r for r in rows if r["integrator"] == "path"]
+    matte_rows = [r for r in rows if r["integrator"] == "matte"]
+    assert path_rows and matte_rows
+    assert all(r["stochastic"] == "true" for r in path_rows)
+    assert all(r["stochastic"] == "false" for r in matte_rows)
+    for r in path_rows:
+        assert math.isfinite(float(r["error_converged"])) and int(r["converged_spp"]) == 64
+    equal = [r for r in path_rows if r["method"] == "full-equal-time"]
+    assert {r["matched_method"] for r in equal} == {"mrt-paper", "nearest"}
+    assert {r["method"] for r in matte_rows} == {"full", "mrt-paper", "nearest"}
+    assert (tmp_path / "tradeoff.png").is_file() and (tmp_path / "tradeoff_triptych.png").is_file()
+
+
+def test_method_names_follow_modes_at_run_time():
+    assert bench.resolve_methods()[0] == "full"
+    assert bench.method_name("paper") == "mrt-paper" and bench.method_name("nearest") == "nearest"
+    register_mode("bench_test_mode", paper_reconstruct)
+    try:
+        assert "mrt-bench_test_mode" in bench.resolve_methods()
+        assert bench.resolve_methods("bench_test_mode,bicubic") == [
+            "full", "mrt-bench_test_mode", "bicubic"]
+    finally:
+        del MODES["bench_test_mode"]
+    assert "mrt-bench_test_mode" not in bench.resolve_methods()
+    with pytest.raises(bench.MRTError, match="unknown method 'nope'"):
+        bench.resolve_methods("mrt-paper,nope")
+
+
+def test_every_experiment_has_the_report_sweep():
+    fraction = bench.build_experiment("fraction")
+    assert [s.params["sample_fraction"] for s in fraction.points[0].settings] == pytest.approx(
+        [0.025 * k for k in range(1, 11)])
+    filt = bench.build_experiment("filter").points[0].settings
+    assert len(filt) == 20 and {s.params["filter_sigma"] for s in filt} == {1, 2, 4, 8}
+    assert [p.defines["res"] for p in bench.build_experiment("pixels").points] == list(
+        range(200, 1201, 100))
+    assert [p.scene for p in bench.build_experiment("objects").points][-1] == "paper_objects_10.xml"
+    assert len(bench.build_experiment("lights").points) == 10
+    trade = bench.build_experiment("tradeoff")
+    assert trade.points[0].defines == {"res": 400, "integrator": "path", "spp": 64,
+                                       "jitter": "true"}
+    for name in bench.EXPERIMENTS:
+        for point in bench.build_experiment(name).points:
+            assert (SCENES / point.scene).is_file()
+    assert bench.build_experiment("objects", res=50).points[0].defines["res"] == 50
+
+
+def test_plots_run_headless_on_synthetic_rows(tmp_path):
+    import matplotlib
+    import numpy as np
+
+    backend = matplotlib.get_backend()
+    rows = []
+    for method, scale in (("full", 0.0), ("mrt-paper", 1.0), ("nearest", 2.0)):
+        for x in (0.05, 0.1):
+            rows.append({"method": method, "group": "", "x": str(x), "status": "ok",
+                         "error": str(scale * x), "error_converged": "nan",
+                         "relative_time": str(1 + scale), "total_s": "0.1", "spp": "1",
+                         "sample_fraction": str(x), "setting": f"f={x}"})
+    exp = bench.build_experiment("fraction", quick=True)
+    bench.plot_sweep(rows, tmp_path / "a.png", exp)
+    bench.plot_tradeoff(rows, tmp_path / "b.png", bench.build_experiment("tradeoff", quick=True))
+    image = np.full((8, 8, 3), 0.5)
+    bench.plot_triptych(tmp_path / "c.png", image, image * 0.9, "mrt-paper")
+    for name in ("a.png", "b.png", "c.png"):
+        assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
+    assert matplotlib.get_backend() == backend  # no global backend switch
+    assert "| mrt-paper |" in bench.markdown_tables(rows, exp)
+
+
+def test_memory_meter_reports_a_peak():
+    import numpy as np
+
+    meter = bench.MemoryMeter()
+    with meter.measure() as mem:
+        block = np.ones(4_000_000)  # 32 MB
+        block[::1000] = 2.0
+    assert mem["peak_mb"] > 0 and mem["delta_mb"] >= 20
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "fraction", "--repeats", "0"], "--repeats must be >= 1"),
+    (["bench", "fraction", "--methods", "mrt-nope"], "unknown method 'mrt-nope'"),
+    (["bench", "pixels", "--res", "100"], "--res does not apply"),
+    (["bench", "fraction", "--scenes", "/nonexistent"], "scenes are not in"),
+])
+def test_bad_input_is_one_line_error(argv, message, capsys, tmp_path):
+    assert main(argv + ["-o", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_unknown_experiment_is_an_argparse_error(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "fig11"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_broken_mode_is_reported_not_fatal(tmp_path):
+    import numpy as np
+
+    def nan_mode(pattern, trace, params, tracer=None):
+        out = paper_reconstruct(pattern, trace, params, tracer)
+        out.image[0, 0] = np.nan
+        return out
+
+    def raising_mode(pattern, trace, params, tracer=None):
+        raise RuntimeError("boom\nsecond line")
+
+    register_mode("bench_nan", nan_mode)
+    register_mode("bench_raise", raising_mode)
+    try:
+        result = bench.run_experiment("objects", tmp_path, quick=True, progress=False, res=24,
+                                      methods="bench_nan,bench_raise,nearest",
+                                      scenes_dir=SCENES)["objects"]
+    finally:
+        del MODES["bench_nan"], MODES["bench_raise"]
+    rows = result["rows"]
+    status = {r["method"]: r["status"] for r in rows}
+    assert status["full"] == status["nearest"] == "ok"
+    assert status["mrt-bench_nan"] == "failed: 1 pixels of the image are NaN or Inf"
+    assert status["mrt-bench_raise"] == "failed: RuntimeError: boom"
+    assert "Failed runs" in (tmp_path / "objects.md").read_text()
