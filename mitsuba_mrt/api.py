@@ -106,9 +106,11 @@ def nested_integrator(scene: mi.Scene, integrator=None):
 AUTO_MARGIN = 0.6
 #: ``auto``'s pilot traces the top 1/AUTO_BAND of the image's rows.
 AUTO_BAND = 16
-#: Below this many samples (pixels x spp) a full render costs no more than a
-#: few launches, less than a pilot would add: ``auto`` renders it directly.
-AUTO_MIN_SAMPLES = 1 << 18
+#: Below this many samples (pixels x spp) ``auto`` renders in full without a
+#: pilot: such a render takes well under a second here (0.18 s for matte at
+#: 1200 x 1200), and the pilot's own launches (~10-20 % of it, measured with
+#: ``bench pixels --methods auto``) would cost more than the MRT could save.
+AUTO_MIN_SAMPLES = 1 << 21
 #: Share of the pixels that ``refine`` is expected to trace beyond the grid
 #: (measured 2-10 % on the bundled scenes at f = 0.1).
 AUTO_REFINE_SHARE = 0.06

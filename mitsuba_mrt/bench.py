@@ -430,7 +430,7 @@ class _PointRunner:
                     continue
                 r.totals.append(result.timings["total"]), r.stages.append(dict(result.timings))
                 r.peaks.append(mem["peak_mb"]), r.deltas.append(mem["delta_mb"])
-                r.traced, r.spp = int(result.pattern.count), int(result.spp)
+                r.traced, r.spp = int(result.traced_mask.sum()), int(result.spp)
                 r.image = result.image
                 self.tick()
         reference = full.image

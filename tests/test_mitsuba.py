@@ -206,9 +206,9 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
     import mitsuba_mrt.api as api
 
     monkeypatch.setattr(api, "AUTO_MARGIN", margin)
-    scene = mi.load_string(small_scene_xml(512))  # 2^18 samples: large enough for a pilot
-    result = mitsuba_mrt.render(scene)
-    reference, _ = mitsuba_mrt.render_reference(scene)
+    scene = mi.load_string(small_scene_xml(512))  # 2^18 samples, 8 spp: 2^21, a pilot
+    result = mitsuba_mrt.render(scene, spp=8)
+    reference, _ = mitsuba_mrt.render_reference(scene, spp=8)
     assert result.stats["auto_reason"] == "pilot"
     if used == "mrt":
         assert result.stats["mode_used"] in ("refine", "idpass")

@@ -1,0 +1,55 @@
+"""End-to-end MRT time against a full render for an expensive integrator.
+
+    python examples/end_to_end.py --res 1000 -D integrator=path -D spp=64 -D jitter=true
+    python examples/end_to_end.py --res 1000 -D integrator=direct -D spp=16 -D jitter=true
+
+The full render and each mode run alternately in one process, ``--repeats``
+times after a warm-up; the median times are reported, with the error (the
+report's metric) against the full render of the same spp.
+"""
+
+import argparse
+import statistics
+import time
+
+import mitsuba_mrt
+from mitsuba_mrt.metrics import paper_error
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="scenes_xml/paper_fig1.xml")
+    parser.add_argument("--res", type=int, default=1000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--modes", default="auto,fast,idpass,refine,bicubic")
+    parser.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE")
+    args = parser.parse_args()
+
+    variant = mitsuba_mrt.activate("auto")
+    defines = dict(d.split("=", 1) for d in args.defines)
+    scene = mitsuba_mrt.load_scene(args.scene, res=args.res, **defines)
+    modes = args.modes.split(",")
+    reference, _ = mitsuba_mrt.render_reference(scene)  # warm-up
+    for mode in modes:
+        mitsuba_mrt.render(scene, mode=mode)
+    full_times, times, errors, used = [], {m: [] for m in modes}, {}, {}
+    for _ in range(args.repeats):
+        reference, seconds = mitsuba_mrt.render_reference(scene)
+        full_times.append(seconds)
+        for mode in modes:
+            start = time.perf_counter()
+            result = mitsuba_mrt.render(scene, mode=mode)
+            times[mode].append(time.perf_counter() - start)
+            errors[mode] = paper_error(result.image, reference)
+            used[mode] = result.stats.get("mode_used", mode)
+    full = statistics.median(full_times)
+    print(f"{args.scene} {args.res}x{args.res} {defines} [{variant}], median of {args.repeats}")
+    print(f"{'mode':8s} {'used':8s} {'seconds':>8s} {'vs full':>8s} {'error vs full':>14s}")
+    print(f"{'full':8s} {'full':8s} {full:8.3f} {1.0:8.3f} {0.0:14.5f}")
+    for mode in modes:
+        t = statistics.median(times[mode])
+        print(f"{mode:8s} {used[mode]:8s} {t:8.3f} {t / full:8.3f} {errors[mode]:14.5f}")
+
+
+if __name__ == "__main__":
+    main()
