@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Set up and run mitsuba-mrt on a fresh machine with nothing but Python.
 
-    python3 run.py render   # MRT + reference of scenes_xml/paper_fig1.xml into out/
+    python3 run.py render   # MRT + reference of scenes_xml/paper_fig1.xml (path, 64 spp) into out/
     python3 run.py test     # the test suite
     python3 run.py bench ARGS...  # python -m mitsuba_mrt bench ARGS...
 
@@ -77,8 +77,10 @@ def main(argv: list[str]) -> int:
     setup()
     command, rest = argv[0], argv[1:]
     if command == "render":
+        # path tracing at 64 spp: where tracing costs enough for the MRT to pay off
         args = ["-m", "mitsuba_mrt", "render", str(ROOT / "scenes_xml" / "paper_fig1.xml"),
-                "-o", str(ROOT / "out")] + rest
+                "-o", str(ROOT / "out"), "-D", "integrator=path", "-D", "spp=64",
+                "-D", "jitter=true"] + rest
     elif command == "bench":
         args = ["-m", "mitsuba_mrt", "bench"] + rest
     else:
