@@ -47,3 +47,11 @@ def small_scene_xml(res: int = 32, integrator: str = '<integrator type="matte"/>
   </sensor>{body}
   {extra}
 </scene>"""
+
+
+def true_ids(scene, rule: str = "exact"):
+    """Every pixel's id, traced (sample fraction 1): the ground truth of the id stages."""
+    import mitsuba_mrt
+
+    full = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0)
+    return full.trace.ids(rule).reshape(full.ids.shape)
