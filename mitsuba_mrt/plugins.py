@@ -8,18 +8,10 @@ import numpy as np
 
 from .errors import MRTError
 from .pipeline import MRTParams
-from .trace import has_mirrors
+from .trace import has_mirrors, is_jit, logical_not
 
 #: The variant whose classes this module defines (it is reloaded on a switch).
 VARIANT = mi.variant()
-
-
-def _jit() -> bool:
-    return dr.is_jit_v(mi.Float)
-
-
-def _not(mask):
-    return ~mask if _jit() else not mask
 
 
 class MatteIntegrator(mi.SamplingIntegrator):
@@ -63,19 +55,19 @@ class MatteIntegrator(mi.SamplingIntegrator):
             valid = active & si.is_valid()
             if depth == 0:
                 first_hit = valid
-            if not (_jit() or valid):
+            if not (is_jit() or valid):
                 break
             bsdf = si.bsdf(ray)
             flags = bsdf.flags()
             mirror = valid & mi.has_flag(flags, mi.BSDFFlags.Delta) \
-                & _not(mi.has_flag(flags, mi.BSDFFlags.Smooth))
-            shade = valid & _not(mirror)
+                & logical_not(mi.has_flag(flags, mi.BSDFFlags.Smooth))
+            shade = valid & logical_not(mirror)
             for light in lights:
                 ds, intensity = light.sample_direction(si, mi.Point2f(0.5, 0.5), shade)
                 f = bsdf.eval(ctx, si, si.to_local(ds.d), shade)
-                lit = shade & _not(scene.ray_test(si.spawn_ray_to(ds.p), shade))
+                lit = shade & logical_not(scene.ray_test(si.spawn_ray_to(ds.p), shade))
                 result += dr.select(lit, throughput * f * intensity, 0.0)
-            if depth == max_depth or not (_jit() or mirror):
+            if depth == max_depth or not (is_jit() or mirror):
                 break
             bs, weight = bsdf.sample(ctx, si, sampler.next_1d(mirror),
                                      sampler.next_2d(mirror), mirror)

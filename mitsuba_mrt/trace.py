@@ -40,7 +40,7 @@ def _is_mirror(bsdf, valid):
     flags = bsdf.flags()
     delta = mi.has_flag(flags, mi.BSDFFlags.Delta)
     smooth = mi.has_flag(flags, mi.BSDFFlags.Smooth)
-    if _is_jit():
+    if is_jit():
         return valid & delta & ~smooth
     return bool(valid and delta and not smooth)
 
@@ -56,15 +56,15 @@ def _follow_mirrors(scene, ray, si, valid):
     chain = []
     ray = mi.Ray3f(ray)
     for _ in range(MIRROR_DEPTH):
-        if not _is_jit() and not valid:
+        if not is_jit() and not valid:
             break
         mirror = _is_mirror(si.bsdf(ray), valid)
-        if not _is_jit() and not mirror:
+        if not is_jit() and not mirror:
             break
         bs, weight = si.bsdf(ray).sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
         new_ray = si.spawn_ray(si.to_world(bs.wo))
         new_si = scene.ray_intersect(new_ray, mirror)
-        if _is_jit():
+        if is_jit():
             throughput = dr.select(mirror, throughput * weight, throughput)
             chain.append((mirror, dr.select(mirror, dr.reinterpret_array(mi.UInt32, new_si.shape),
                                             mi.UInt32(0))))
@@ -85,8 +85,14 @@ def tracked_lights(scene: mi.Scene) -> list:
     return lights[:MAX_TRACKED_LIGHTS]
 
 
-def _is_jit() -> bool:
+def is_jit() -> bool:
+    """True in a JIT variant (LLVM, CUDA), False in a scalar one."""
     return dr.is_jit_v(mi.Float)
+
+
+def logical_not(mask):
+    """``~mask`` for Dr.Jit masks, ``not mask`` for the scalar variant's bools."""
+    return ~mask if is_jit() else not mask
 
 
 def _to_numpy(value, width: int) -> np.ndarray:
@@ -147,12 +153,12 @@ def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
     if mirrors:
         ray, si, valid, throughput, chain = _follow_mirrors(scene, ray, si, valid)
     bsdf = si.bsdf(ray)
-    albedo = bsdf.eval_diffuse_reflectance(si, valid) if (_is_jit() or valid) \
+    albedo = bsdf.eval_diffuse_reflectance(si, valid) if (is_jit() or valid) \
         else mi.Color3f(0.0)
     albedo = dr.select(valid, throughput * albedo, 0.0)
     mask = mi.UInt32(0)
     for k, light in enumerate(lights):
-        if not (_is_jit() or valid):
+        if not (is_jit() or valid):
             break
         ds, spec = light.sample_direction(si, mi.Point2f(0.5, 0.5), valid)
         if rule == "rays":
@@ -160,8 +166,8 @@ def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
         elif rule == "facing":
             blocked = dr.dot(si.n, ds.d) <= 0.0
         else:
-            blocked = mi.Bool(False) if _is_jit() else False
-        lit = valid & (~blocked if _is_jit() else not blocked) & (dr.max(spec) > 0.0)
+            blocked = mi.Bool(False) if is_jit() else False
+        lit = valid & logical_not(blocked) & (dr.max(spec) > 0.0)
         mask |= dr.select(lit, mi.UInt32(1 << k), mi.UInt32(0))
     return first, first_valid, albedo, mask, chain
 
@@ -201,7 +207,7 @@ def ordered_shapes(scene: mi.Scene) -> list:
 def _shape_lookup(scene: mi.Scene):
     """Map from Dr.Jit shape pointers (JIT) or shape objects (scalar) to 1-based indices."""
     shapes = ordered_shapes(scene)
-    if _is_jit():
+    if is_jit():
         keys = np.array([int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0])
                          for s in shapes], dtype=np.int64)
         order = np.argsort(keys)
@@ -245,7 +251,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     spp = sampler.sample_count()
-    trace = (_trace_jit if _is_jit() else _trace_scalar)(
+    trace = (_trace_jit if is_jit() else _trace_scalar)(
         scene, sensor, integrator if radiance else None, sampler, pixel_xy, spp, seed, lights,
         lookup, aovs, rule)
     radiance, albedo, shape_index, visible, path_id = trace
