@@ -276,9 +276,12 @@ def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, 
         ray, weight = _camera_ray(sensor, sampler, pixel, spp)
         radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
         radiance = mi.Color3f(weight * radiance)
+        # Evaluate once: block_sum reduces each channel on its own, and on an
+        # unevaluated radiance each reduction would re-run the integrator.
+        dr.eval(radiance)
         if spp > 1:
             radiance = dr.block_sum(radiance, spp) / spp
-        dr.eval(radiance)
+            dr.eval(radiance)
         radiance = _to_numpy(radiance, n)
     if not aovs:
         zero = np.zeros(n, np.int64)
