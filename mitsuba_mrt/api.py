@@ -23,7 +23,7 @@ import numpy as np
 from .errors import MRTError
 from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, reconstruct
 from .sampling import SamplePattern, grid_pattern
-from .trace import trace_pixels
+from .trace import is_jit, trace_pixels
 
 
 @dataclass
@@ -178,8 +178,8 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
 def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
     """Decide between refine, idpass and a full render from a measured pilot.
 
-    Small jobs (fewer than ``AUTO_MIN_SAMPLES`` samples) are rendered in
-    full without a pilot.  Otherwise the pilot traces the top
+    Small jobs (fewer than ``AUTO_MIN_SAMPLES`` samples), and every job in
+    the scalar variant, are rendered in full without a pilot.  Otherwise the pilot traces the top
     ``1 / AUTO_BAND`` of the image: every pixel with the nested integrator
     alone (what a full render pays; kept as part of the image if the full
     render wins) and the grid rows in it with the id AOVs (what the MRT pays
@@ -192,6 +192,10 @@ def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
     nr, nc = pattern.grid_shape
     width, height = pattern.width, pattern.height
     pixels = width * height
+    if not is_jit():
+        # The scalar variant traces pixel by pixel in Python, while mi.render
+        # runs Mitsuba's multithreaded C++ loop: the MRT cannot win there.
+        return {"mode_used": "full", "auto_reason": "scalar", "pilot_pixels": 0}
     if pixels * spp < AUTO_MIN_SAMPLES or height < 2 * AUTO_BAND:
         return {"mode_used": "full", "auto_reason": "small", "pilot_pixels": 0}
     band_height = height // AUTO_BAND

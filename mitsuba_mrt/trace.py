@@ -318,7 +318,7 @@ def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, light
     mirrors = has_mirrors(scene)
     steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
     for k, (x, y) in enumerate(pixel_xy.tolist()):
-        sampler.seed(seed * 0x9E3779B1 + k)
+        sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
         pixel = mi.Point2f(x, y)
         for _ in range(spp if integrator is not None else 0):
             ray, weight = _camera_ray(sensor, sampler, pixel, spp)

@@ -178,13 +178,14 @@ def test_nan_radiance_is_a_clear_error(variant):
                            mode="paper")
 
 
-def test_scalar_variant_gives_the_same_trace(variant):
+@pytest.mark.parametrize("mode", ["paper", "fast", "refine", "idpass"])
+def test_scalar_variant_gives_the_same_trace(variant, mode):
     xml = small_scene_xml(24)
-    llvm_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2, mode="paper")
+    llvm_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2, mode=mode)
     try:
         mi.set_variant("scalar_rgb")
         scalar_result = mitsuba_mrt.render(mi.load_string(xml), sample_fraction=0.2,
-                                           mode="paper")
+                                           mode=mode)
     finally:
         mi.set_variant(variant)
     assert np.allclose(scalar_result.trace.radiance, llvm_result.trace.radiance, atol=1e-5)
@@ -222,3 +223,13 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
     else:
         assert result.traced_mask.sum() >= grid_pattern(512, 512, 0.1).count
         assert paper_error(result.image, reference) < 0.002
+
+
+def test_auto_renders_in_full_in_the_scalar_variant(variant):
+    xml = small_scene_xml(16)
+    try:
+        mi.set_variant("scalar_rgb")
+        result = mitsuba_mrt.render(mi.load_string(xml))  # checked before the job size
+    finally:
+        mi.set_variant(variant)
+    assert result.stats["mode_used"] == "full" and result.stats["auto_reason"] == "scalar"
