@@ -166,6 +166,11 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         trace, decision, used = tracer(pattern.pixel_xy, 0), {}, mode
 
     recon: Reconstruction = reconstruct(pattern, trace, params, used, tracer)
+    band = decision.pop("band", None)
+    if band is not None:  # auto's pilot traced these rows in full: keep them
+        check_radiance(band, "pilot pixels")
+        recon.image[: len(band)] = band
+        recon.traced_mask[: len(band)] = True
     timings = {"trace": trace.seconds, **recon.timings,
                "total": time.perf_counter() - start}
     stats = {**decision, **dict(recon.stats), "mode_used": used}
@@ -227,7 +232,8 @@ def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
         rest = tracer(xy[rest_rows].reshape(-1, 2), 0)
         merged = _merge_rows(pattern, pilot_rows, pilot, rest_rows, rest)
         decision["trace"] = _with_seconds(merged, band.seconds + pilot.seconds + rest.seconds)
-        del decision["band"], decision["band_height"]
+        decision["band"] = band.radiance.reshape(band_height, width, 3)
+        del decision["band_height"]
     else:
         decision["pilot"] = (pilot_rows, pilot)
     return decision

@@ -223,6 +223,9 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
     else:
         assert result.traced_mask.sum() >= grid_pattern(512, 512, 0.1).count
         assert paper_error(result.image, reference) < 0.002
+        # the pilot's band (top 1/16, traced in full) is kept exactly
+        assert result.traced_mask[:32].all()
+        assert np.allclose(result.image[:32], reference[:32], atol=1e-6)
 
 
 def test_auto_renders_in_full_in_the_scalar_variant(variant):
