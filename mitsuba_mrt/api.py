@@ -11,10 +11,11 @@ Example::
 
 from __future__ import annotations
 
+import functools
 import os
 import time
 import xml.etree.ElementTree as ElementTree
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -226,14 +227,13 @@ def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
                 "predicted_refine_s": predicted["refine"],
                 "predicted_idpass_s": predicted["idpass"],
                 "pilot_pixels": int(len(band_xy) + pilot.radiance.shape[0]),
-                "band": band, "band_height": band_height}
+                "band": band}
     if wins:
         rest_rows = np.setdiff1d(np.arange(nr), pilot_rows)
         rest = tracer(xy[rest_rows].reshape(-1, 2), 0)
         merged = _merge_rows(pattern, pilot_rows, pilot, rest_rows, rest)
-        decision["trace"] = _with_seconds(merged, band.seconds + pilot.seconds + rest.seconds)
+        decision["trace"] = replace(merged, seconds=band.seconds + pilot.seconds + rest.seconds)
         decision["band"] = band.radiance.reshape(band_height, width, 3)
-        del decision["band_height"]
     else:
         decision["pilot"] = (pilot_rows, pilot)
     return decision
@@ -251,7 +251,6 @@ def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, de
     width, height = pattern.width, pattern.height
     band = decision.pop("band", None)
     pilot_rows, pilot = decision.pop("pilot", (None, None))
-    decision.pop("band_height", None)
     if band is None:
         image, seconds = render_reference(scene, nested, sensor=sensor, spp=spp, seed=seed)
         ids = np.zeros((height, width), dtype=np.int64)
@@ -276,49 +275,40 @@ def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, de
                      decision)
 
 
-def _with_seconds(trace: SparseTrace, seconds: float) -> SparseTrace:
-    return SparseTrace(trace.radiance, trace.albedo, trace.shape_index, trace.visible_lights,
-                       trace.num_lights, trace.spp, seconds, trace.shadow_rays)
-
-
 def _merge_rows(pattern, rows_a, trace_a, rows_b, trace_b) -> SparseTrace:
     """Two traces of disjoint grid rows, as one trace in grid order."""
     nr, nc = pattern.grid_shape
     order = np.empty(nr, dtype=np.int64)
     order[np.concatenate([rows_a, rows_b])] = np.arange(nr)
+
     def merge(a, b):
         both = np.concatenate([a.reshape(len(rows_a), nc, -1), b.reshape(len(rows_b), nc, -1)])
         return both[order].reshape((nr * nc,) + a.shape[1:])
-    return SparseTrace(merge(trace_a.radiance, trace_b.radiance),
-                       merge(trace_a.albedo, trace_b.albedo),
-                       merge(trace_a.shape_index, trace_b.shape_index),
-                       merge(trace_a.visible_lights, trace_b.visible_lights),
-                       trace_a.num_lights, trace_a.spp, 0.0, trace_a.shadow_rays)
+    path_id = None if trace_a.path_id is None else merge(trace_a.path_id, trace_b.path_id)
+    return replace(trace_a, radiance=merge(trace_a.radiance, trace_b.radiance),
+                   albedo=merge(trace_a.albedo, trace_b.albedo),
+                   shape_index=merge(trace_a.shape_index, trace_b.shape_index),
+                   visible_lights=merge(trace_a.visible_lights, trace_b.visible_lights),
+                   path_id=path_id, seconds=0.0)
 
 
-_RECON_COST = {}
-
-
+@functools.cache
 def _reconstruction_seconds_per_pixel() -> float:
     """Seconds per pixel of the fast reconstruction, measured once per process.
 
     A synthetic 256 x 256 scene of two regions stands in for a real one;
     the result is doubled, since real scenes have more edges.
     """
-    if "fast" not in _RECON_COST:
-        from .pipeline import reconstruct as run
-
-        p = grid_pattern(256, 256, 0.1)
-        x, y = p.pixel_xy[:, 0], p.pixel_xy[:, 1]
-        shape = 1 + ((x - 128) ** 2 + (y - 128) ** 2 < 60 ** 2)
-        rad = np.repeat((0.5 + 0.001 * x)[:, None], 3, axis=1)
-        trace = SparseTrace(rad, np.ones((p.count, 3)), shape, np.zeros(p.count, np.uint32),
-                            0, 1, 0.0)
-        run(p, trace, MRTParams(id_rule="exact"), "fast")  # warm caches
-        begin = time.perf_counter()
-        run(p, trace, MRTParams(id_rule="exact"), "fast")
-        _RECON_COST["fast"] = 2.0 * (time.perf_counter() - begin) / (256 * 256)
-    return _RECON_COST["fast"]
+    p = grid_pattern(256, 256, 0.1)
+    x, y = p.pixel_xy[:, 0], p.pixel_xy[:, 1]
+    shape = 1 + ((x - 128) ** 2 + (y - 128) ** 2 < 60 ** 2)
+    rad = np.repeat((0.5 + 0.001 * x)[:, None], 3, axis=1)
+    trace = SparseTrace(rad, np.ones((p.count, 3)), shape, np.zeros(p.count, np.uint32),
+                        0, 1, 0.0)
+    reconstruct(p, trace, MRTParams(id_rule="exact"), "fast")  # warm caches
+    begin = time.perf_counter()
+    reconstruct(p, trace, MRTParams(id_rule="exact"), "fast")
+    return 2.0 * (time.perf_counter() - begin) / (256 * 256)
 
 
 def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
@@ -331,7 +321,5 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
     dr.eval(image)
     image = np.array(image, dtype=np.float64)[..., :3]
     seconds = time.perf_counter() - start
-    bad = ~np.isfinite(image).all(axis=-1)
-    if bad.any():
-        raise MRTError(f"the reference render has NaN or Inf radiance at {int(bad.sum())} pixels")
+    check_radiance(image, "pixels of the full render")
     return image, seconds

@@ -4,7 +4,8 @@ Both functions work on plain numpy arrays.  The traced pixels form the
 tensor grid of a :class:`~mitsuba_mrt.sampling.SamplePattern`, so the known
 pixels inside any rectangle are a sub-block of the grid, found by two
 ``searchsorted`` calls, and the known pixel nearest to a point is found one
-axis at a time (Euclidean distance on a tensor grid is separable).
+axis at a time (Euclidean distance on a tensor grid is separable), from the
+pattern's ``nearest_rows`` and ``nearest_cols``.
 """
 
 from __future__ import annotations
@@ -14,16 +15,6 @@ from scipy import ndimage
 
 from .errors import MRTError
 from .sampling import SamplePattern
-
-
-def _nearest(values: np.ndarray, target: int) -> int:
-    """Index of the entry of sorted ``values`` nearest to ``target`` (first on ties)."""
-    k = int(np.searchsorted(values, target))
-    if k == 0:
-        return 0
-    if k == len(values):
-        return len(values) - 1
-    return k - 1 if target - values[k - 1] <= values[k] - target else k
 
 
 def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
@@ -59,6 +50,7 @@ def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
         raise MRTError(f"grid_ids has shape {grid_ids.shape}, "
                        f"expected {pattern.grid_shape}")
     rows, cols = pattern.rows, pattern.cols
+    nearest_rows, nearest_cols = pattern.nearest_rows, pattern.nearest_cols
     out = np.zeros((pattern.height, pattern.width), dtype=np.int64)
     stack = [(0, pattern.height, 0, pattern.width)]
     while stack:
@@ -82,8 +74,10 @@ def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
             if has_rows and has_cols:
                 stack.append((qr0, qr1, qc0, qc1))
             else:
-                i = i0 + _nearest(rows[i0:i1], corner_r)
-                j = j0 + _nearest(cols[j0:j1], corner_c)
+                # nearest known pixel within the parent: on a sorted axis, the
+                # image-wide nearest grid line clipped into the parent's lines
+                i = min(max(nearest_rows[corner_r], i0), i1 - 1)
+                j = min(max(nearest_cols[corner_c], j0), j1 - 1)
                 out[qr0:qr1, qc0:qc1] = grid_ids[i, j]
     return out
 

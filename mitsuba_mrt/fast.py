@@ -273,6 +273,22 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     edges_s = time.perf_counter() - start
 
     start = time.perf_counter()
+    image = interpolate_traced_grid(pattern, trace, sample_ids, id_map, stats)
+    return Reconstruction(image, id_map, pattern.mask,
+                          {"edges": edges_s, "interpolate": time.perf_counter() - start}, stats)
+
+
+def interpolate_traced_grid(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
+                            id_map: np.ndarray, stats: Counter) -> np.ndarray:
+    """Radiance at every pixel from the traced grid, within each pixel's id.
+
+    Radiance is interpolated directly when albedo is constant within every
+    id; otherwise irradiance (radiance / albedo) and albedo are, with the
+    same weights, and multiplied back.  A black background is filled, and
+    traced pixels keep their traced radiance.  Skips and the number of
+    pixels fitted near edges are counted in ``stats``.
+    """
+    grid_ids = sample_ids.reshape(pattern.grid_shape)
     grid_shape = pattern.grid_shape + (3,)
     albedo = safe_albedo(trace.albedo)
     constant = black_background(sample_ids, trace.radiance, stats)
@@ -288,8 +304,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
         image = interp[..., :3] * interp[..., 3:]
     image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(grid_shape)
     stats["edge_pixels"] = int(edge_pixels)
-    return Reconstruction(image, id_map, pattern.mask,
-                          {"edges": edges_s, "interpolate": time.perf_counter() - start}, stats)
+    return image
 
 
 def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter) -> dict:

@@ -8,6 +8,7 @@ import numpy as np
 
 from .errors import MRTError
 from .pipeline import MRTParams
+from .ids import id_to_paper_float
 from .trace import has_mirrors, is_jit, logical_not
 
 #: The variant whose classes this module defines (it is reloaded on a switch).
@@ -196,7 +197,7 @@ def aov_images(result) -> dict[str, np.ndarray]:
     trace, ids = result.trace, result.ids
     sample_ids = trace.ids(result.params.rule_for(result.mode))
     if result.params.rule_for(result.mode) == "paper":
-        id_image = ids / 2.0
+        id_image = id_to_paper_float(ids)
     else:
         id_image = np.searchsorted(np.unique(ids), ids).astype(np.float64)
     return {

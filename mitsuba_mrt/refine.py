@@ -7,8 +7,9 @@ midpoint their id), and the sub-cells whose corners still differ are split
 again, down to single pixels.  Sub-cells whose corners agree take that id.  The cost grows with
 the length of the edges, not with the area, and every pixel near an edge
 ends up with its traced id (up to features thinner than the sub-cells).
-Values then come from :func:`mitsuba_mrt.fast.interpolate_within_ids` with
-the refined ids, and every traced pixel keeps its traced radiance.
+Values then come from :func:`mitsuba_mrt.fast.interpolate_traced_grid` with
+the refined ids (demodulated by albedo where it varies, as in ``fast``), and
+every traced pixel keeps its traced radiance.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from collections import Counter
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .fast import interpolate_within_ids
+from .fast import interpolate_traced_grid
 from .errors import MRTError
 from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, register_mode
 from .sampling import SamplePattern
@@ -125,8 +126,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     edges_s = time.perf_counter() - start - trace_s
 
     start = time.perf_counter()
-    values = trace.radiance.astype(np.float32).reshape(pattern.grid_shape + (3,))
-    image, edge_pixels = interpolate_within_ids(pattern, grid_ids, values, id_map)
+    image = interpolate_traced_grid(pattern, trace, grid_ids.ravel(), id_map, stats)
     traced_mask = pattern.mask.copy()
     if extra:
         xy = np.concatenate([p for p, _ in extra])
@@ -136,9 +136,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
         traced_mask[xy[:, 1], xy[:, 0]] = True
         _fix_orphans(image, id_map, traced_mask, grid_ids, pattern, xy,
                      np.concatenate([m.ids(rule) for _, m in extra]), radiance)
-    image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(pattern.grid_shape + (3,))
     stats["regions"] = int(len(np.unique(id_map)))
-    stats["edge_pixels"] = int(edge_pixels)
     stats["refined_pixels"] = int(traced_mask.sum() - pattern.count)
     stats["refined_fraction"] = float(stats["refined_pixels"] / id_map.size)
     return Reconstruction(image, id_map, traced_mask,

@@ -58,10 +58,11 @@ def _follow_mirrors(scene, ray, si, valid):
     for _ in range(MIRROR_DEPTH):
         if not is_jit() and not valid:
             break
-        mirror = _is_mirror(si.bsdf(ray), valid)
+        bsdf = si.bsdf(ray)
+        mirror = _is_mirror(bsdf, valid)
         if not is_jit() and not mirror:
             break
-        bs, weight = si.bsdf(ray).sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
+        bs, weight = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
         new_ray = si.spawn_ray(si.to_world(bs.wo))
         new_si = scene.ray_intersect(new_ray, mirror)
         if is_jit():

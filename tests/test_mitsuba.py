@@ -236,3 +236,19 @@ def test_auto_renders_in_full_in_the_scalar_variant(variant):
     finally:
         mi.set_variant(variant)
     assert result.stats["mode_used"] == "full" and result.stats["auto_reason"] == "scalar"
+
+
+def test_auto_keeps_mirror_chains_when_it_merges_the_pilot(variant):
+    from mitsuba_mrt.api import _merge_rows
+
+    p = grid_pattern(8, 8, 0.5)
+    nr, nc = p.grid_shape
+    def part(rows, offset):
+        n = len(rows) * nc
+        return mitsuba_mrt.SparseTrace(np.zeros((n, 3)), np.ones((n, 3)), np.ones(n, np.int64),
+                                       np.zeros(n, np.uint32), 0, 1, 0.0,
+                                       path_id=np.arange(n, dtype=np.int64) + offset)
+    a_rows, b_rows = np.arange(0, nr, 2), np.arange(1, nr, 2)
+    merged = _merge_rows(p, a_rows, part(a_rows, 0), b_rows, part(b_rows, 1000))
+    assert merged.path_id is not None
+    assert np.array_equal(merged.path_id.reshape(nr, nc)[1], np.arange(nc) + 1000)
