@@ -27,6 +27,7 @@ from collections import Counter
 import numpy as np
 from scipy import sparse
 
+from . import fast_jit
 from .compose import ALBEDO_EPS, safe_albedo
 from .edges import smooth_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
@@ -147,7 +148,8 @@ _RIDGE = np.array([1e-9, 1e-3, 1e-3, 3e-2, 3e-2, 3e-2])
 
 
 def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np.ndarray,
-                   py: np.ndarray, px: np.ndarray, own: np.ndarray) -> np.ndarray:
+                   py: np.ndarray, px: np.ndarray, own: np.ndarray,
+                   use_jit: bool | None = None) -> np.ndarray:
     """Values at pixels (py, px) from a weighted quadric through same-id samples.
 
     One fit per (grid cell, id): the samples are the 4 x 4 grid block around
@@ -156,6 +158,10 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     mean, so that gradients and curvature continue up to an edge instead of
     flattening.  Pixels whose block has no sample of their id take the
     value of their nearest traced pixel.
+
+    With ``use_jit`` (default: when Dr.Jit's LLVM backend is usable) the
+    same fit runs per pixel in one kernel (:mod:`mitsuba_mrt.fast_jit`);
+    otherwise once per (cell, id) group in numpy.
     """
     nr, nc = grid_ids.shape
     rows, cols = pattern.rows, pattern.cols
@@ -163,6 +169,14 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     cy, _ = cell_coordinates(rows, pattern.height)
     cx, _ = cell_coordinates(cols, pattern.width)
     cell_y, cell_x = cy[py], cx[px]
+    if use_jit is None:
+        use_jit = fast_jit.available()
+    if use_jit:
+        return fast_jit.local_poly_fit_jit(
+            rows, cols, grid_ids, grid_values, py, px, own, cell_y, cell_x,
+            0.5 * (rows[cell_y] + rows[np.minimum(cell_y + 1, nr - 1)]),
+            0.5 * (cols[cell_x] + cols[np.minimum(cell_x + 1, nc - 1)]), spacing, _RIDGE,
+            grid_values[pattern.nearest_rows[py], pattern.nearest_cols[px]])
     id_values, id_rank = np.unique(own, return_inverse=True)
     keys = (cell_y * nc + cell_x) * len(id_values) + id_rank.ravel()
     groups, member = np.unique(keys, return_inverse=True)

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
-from mitsuba_mrt.fast import interpolate_within_ids, region_boxes, separable_cubic
+from mitsuba_mrt import fast_jit
+from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, region_boxes, separable_cubic
 from mitsuba_mrt.edges import smooth_ids
 
 
@@ -92,3 +93,20 @@ def test_tiny_grids(shape):
     p = grid_pattern(w, h, 0.5)
     out = reconstruct(p, trace_from(p, np.arange(p.count, dtype=float)), mode="fast")
     assert np.isfinite(out.image).all()
+
+
+@pytest.mark.skipif(not fast_jit.available(), reason="needs Dr.Jit's LLVM backend")
+@pytest.mark.parametrize("channels", [1, 6])
+def test_jit_and_numpy_near_edge_fits_agree(channels):
+    # random ids make every kind of stencil: full, partial, one-sample and
+    # empty (the pixel's id is absent from its block: nearest-value fallback)
+    p = grid_pattern(90, 70, 0.1)
+    rng = np.random.default_rng(7)
+    grid_ids = rng.integers(0, 4, p.grid_shape).astype(np.int64) << 33
+    values = rng.normal(size=p.grid_shape + (channels,)).astype(np.float32)
+    py, px = np.nonzero(rng.random((70, 90)) < 0.5)
+    own = rng.integers(0, 5, len(py)).astype(np.int64) << 33
+    jit = local_poly_fit(p, grid_ids, values, py, px, own, use_jit=True)
+    ref = local_poly_fit(p, grid_ids, values, py, px, own, use_jit=False)
+    assert jit.shape == ref.shape == (len(py), channels)
+    assert np.allclose(jit, ref, rtol=1e-5, atol=1e-5)
