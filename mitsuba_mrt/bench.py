@@ -6,8 +6,12 @@ Every experiment sweeps one parameter of the report (its Figs. 6-10) or, for
 loaded once; every method is called once to warm up (Dr.Jit compiles its
 kernels then; that first-call time is the ``warmup_s`` column), and then,
 ``repeats`` times, the full render and every method in turn, alternating, in
-this process. The row of a method holds the lower median of its totals (and
-the stage times of that same run).
+this process; a point whose full render is fast gets more rounds, until the
+full render's timed runs add up to ``MIN_TIMED_SECONDS`` (a median of three
+millisecond runs on a busy machine is noise), at most ``MAX_REPEATS`` rounds
+and ``EXTRA_ROUNDS_SECONDS`` of extra wall time (none with ``quick``; the
+``repeats`` column holds the rounds run). The row of a method holds the lower
+median of its totals (and the stage times of that same run).
 
 Methods, by name: ``full`` (the plain Mitsuba render with the same
 integrator and spp, the reference: relative time 1), ``mrt-<mode>`` for each
@@ -59,6 +63,13 @@ EQUAL_TIME = "full-equal-time"
 
 #: Converged reference of a stochastic point: the mean of this many full
 #: renders (other seeds), so it has this factor times the point's spp.
+#: Timed seconds of the full render below which a point gets more rounds.
+MIN_TIMED_SECONDS = 1.0
+#: Most timed rounds of one point.
+MAX_REPEATS = 25
+#: Wall seconds after which a point gets no more extra rounds.
+EXTRA_ROUNDS_SECONDS = 10.0
+
 CONVERGED_FACTOR = 16
 
 #: Columns of every CSV, in order.
@@ -340,6 +351,10 @@ class _Runs:
         return int(order[(len(order) - 1) // 2])
 
 
+def _no_tick():
+    """The progress bar counts the requested rounds only."""
+
+
 def _failure(exc: BaseException) -> str:
     """The status of a run that raised: one line."""
     if isinstance(exc, KeyboardInterrupt):
@@ -364,10 +379,12 @@ class _PointRunner:
     """Runs every method of one point; yields rows and the triptych images."""
 
     def __init__(self, experiment: Experiment, point: Point, methods: list, repeats: int,
-                 scenes_dir: Path, meter: MemoryMeter, env: dict, tick):
+                 scenes_dir: Path, meter: MemoryMeter, env: dict, tick,
+                 min_seconds: float = MIN_TIMED_SECONDS):
         self.exp, self.point, self.methods = experiment, point, methods
         self.repeats, self.scenes_dir, self.meter, self.env = repeats, scenes_dir, meter, env
         self.tick = tick
+        self.min_seconds = min_seconds  # timed seconds of the full render to reach
 
     # one call, timed and metered
     def _full(self, scene, spp, seed=0):
@@ -410,28 +427,36 @@ class _PointRunner:
                 failed[(s, m)] = _failure(exc)
             self.tick()
 
-        # timed runs, alternating: full, then every method at every setting
-        for _ in range(self.repeats):
+        # timed runs, alternating: full, then every method at every setting; runs
+        # of milliseconds get more rounds, until the full render has min_seconds
+        # (at most MAX_REPEATS rounds or EXTRA_ROUNDS_SECONDS of wall time), since a
+        # median of 3 is noise at that scale
+        rounds, begin = 0, time.perf_counter()
+        while rounds < self.repeats or (
+                sum(full.totals) < self.min_seconds and rounds < MAX_REPEATS
+                and time.perf_counter() - begin < EXTRA_ROUNDS_SECONDS):
+            tick = self.tick if rounds < self.repeats else _no_tick
+            rounds += 1
             image, seconds, stages, mem = self._full(scene, point.spp)
             full.totals.append(seconds), full.stages.append(stages)
             full.peaks.append(mem["peak_mb"]), full.deltas.append(mem["delta_mb"])
             full.image = image
-            self.tick()
+            tick()
             for (s, m), r in runs.items():
                 if (s, m) in failed:
-                    self.tick()
+                    tick()
                     continue
                 try:
                     result, mem = self._mrt(scene, modes[m], point.settings[s])
                 except Exception as exc:  # noqa: BLE001
                     failed[(s, m)] = _failure(exc)
-                    self.tick()
+                    tick()
                     continue
                 r.totals.append(result.timings["total"]), r.stages.append(dict(result.timings))
                 r.peaks.append(mem["peak_mb"]), r.deltas.append(mem["delta_mb"])
                 r.traced, r.spp = int(result.traced_mask.sum()), int(result.spp)
                 r.image = result.image
-                self.tick()
+                tick()
         reference = full.image
         full.traced, full.spp = width * height, point.spp
 
@@ -469,7 +494,7 @@ class _PointRunner:
         base = {"experiment": self.exp.name, "scene": point.scene, "x_name": self.exp.x_name,
                 "integrator": point.integrator,
                 "defines": ";".join(f"{k}={v}" for k, v in point.defines.items()),
-                "width": width, "height": height, "repeats": self.repeats,
+                "width": width, "height": height, "repeats": rounds,
                 "reference_s": ref_median, "stochastic": stochastic,
                 "converged_spp": CONVERGED_FACTOR * point.spp if stochastic else "",
                 "peak_memory_source": self.meter.source, **self.env}
@@ -942,7 +967,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
         for k, point in enumerate(experiment.points):
             bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px", refresh=False)
             runner = _PointRunner(experiment, point, method_list, repeats, scenes, meter, env,
-                                  lambda: bar.update(1))
+                                  lambda: bar.update(1), 0.0 if quick else MIN_TIMED_SECONDS)
             point_rows, point_images = runner.run(rep_setting if k == rep_point else None)
             rows += point_rows
             if point_images is not None:
@@ -971,7 +996,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
 
     md = out / f"{name}.md"
     text = (f"Command: `{command}`\n\n"
-            f"Environment: {environment_line(env)}; repeats {repeats} (lower median); "
+            f"Environment: {environment_line(env)}; repeats {repeats}, more where the full render is fast (lower median); "
             f"wall time of the whole experiment {seconds:.0f} s.\n\n"
             + markdown_tables(text_rows, experiment))
     with atomic_path(md) as tmp:
