@@ -996,7 +996,8 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
 
     md = out / f"{name}.md"
     text = (f"Command: `{command}`\n\n"
-            f"Environment: {environment_line(env)}; repeats {repeats}, more where the full render is fast (lower median); "
+            f"Environment: {environment_line(env)}; repeats {repeats}, more where the full "
+            f"render is fast (lower median); "
             f"wall time of the whole experiment {seconds:.0f} s.\n\n"
             + markdown_tables(text_rows, experiment))
     with atomic_path(md) as tmp:
