@@ -284,12 +284,14 @@ def _merge_rows(pattern, rows_a, trace_a, rows_b, trace_b) -> SparseTrace:
     def merge(a, b):
         both = np.concatenate([a.reshape(len(rows_a), nc, -1), b.reshape(len(rows_b), nc, -1)])
         return both[order].reshape((nr * nc,) + a.shape[1:])
-    path_id = None if trace_a.path_id is None else merge(trace_a.path_id, trace_b.path_id)
+    optional = {name: None if getattr(trace_a, name) is None
+                else merge(getattr(trace_a, name), getattr(trace_b, name))
+                for name in ("path_id", "curved_mirror")}
     return replace(trace_a, radiance=merge(trace_a.radiance, trace_b.radiance),
                    albedo=merge(trace_a.albedo, trace_b.albedo),
                    shape_index=merge(trace_a.shape_index, trace_b.shape_index),
                    visible_lights=merge(trace_a.visible_lights, trace_b.visible_lights),
-                   path_id=path_id, seconds=0.0)
+                   seconds=0.0, **optional)
 
 
 @functools.cache

@@ -109,6 +109,10 @@ class SparseTrace:
     path_id : ndarray of int64, shape (n,), optional
         The chain of shapes met along specular (mirror) bounces, encoded
         as one integer (equal to ``shape_index`` without mirrors).
+    curved_mirror : ndarray of bool, shape (n,), optional
+        True where the pixel-centre ray first hits a curved mirror (see
+        :func:`mitsuba_mrt.trace.curved_mirror_indices`); None when the
+        scene has none.
     """
 
     radiance: np.ndarray
@@ -120,6 +124,7 @@ class SparseTrace:
     seconds: float
     shadow_rays: bool = True
     path_id: np.ndarray | None = None
+    curved_mirror: np.ndarray | None = None
 
     def ids(self, rule: str) -> np.ndarray:
         """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.ids`).

@@ -7,6 +7,9 @@ midpoint their id), and the sub-cells whose corners still differ are split
 again, down to single pixels.  Sub-cells whose corners agree take that id.  The cost grows with
 the length of the edges, not with the area, and every pixel near an edge
 ends up with its traced id (up to features thinner than the sub-cells).
+Cells with a corner on a curved mirror are split down to pixels whatever
+their ids: such a mirror minifies what it reflects, so its reflected
+regions are often thinner than the cells and invisible to their corners.
 Values then come from :func:`mitsuba_mrt.fast.interpolate_traced_grid` with
 the refined ids (demodulated by albedo where it varies, as in ``fast``), and
 every traced pixel keeps its traced radiance.
@@ -26,7 +29,8 @@ from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, re
 from .sampling import SamplePattern
 
 
-def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids):
+def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids,
+                 grid_split: np.ndarray | None = None):
     """Trace midpoints of mixed cells, level by level, until edges are resolved.
 
     Parameters
@@ -36,6 +40,12 @@ def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids):
     trace_ids : callable
         ``trace_ids(pixel_xy) -> ids`` traces (column, row) pixels and
         returns their ids; called once per level with all of its new points.
+        With ``grid_split`` it returns ``(ids, split)``.
+    grid_split : ndarray of bool, shape pattern.grid_shape, optional
+        Samples whose cells are split even where the corner ids agree,
+        down to pixels (e.g. those on a curved mirror, whose minified
+        reflections may lie between the corners); ``split`` flags the
+        traced points the same way.
 
     Returns
     -------
@@ -46,6 +56,10 @@ def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids):
     """
     ids = np.full((pattern.height, pattern.width), -1, dtype=np.int64)
     ids[np.ix_(pattern.rows, pattern.cols)] = grid_ids
+    split = None
+    if grid_split is not None and grid_split.any():
+        split = np.zeros((pattern.height, pattern.width), dtype=bool)
+        split[np.ix_(pattern.rows, pattern.cols)] = grid_split
     r0 = np.repeat(pattern.rows[:-1], len(pattern.cols) - 1)
     r1 = np.repeat(pattern.rows[1:], len(pattern.cols) - 1)
     c0 = np.tile(pattern.cols[:-1], len(pattern.rows) - 1)
@@ -55,6 +69,8 @@ def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids):
     while len(r0):
         corners = np.stack([ids[r0, c0], ids[r0, c1], ids[r1, c0], ids[r1, c1]], axis=1)
         mixed = (corners != corners[:, :1]).any(axis=1)
+        if split is not None:
+            mixed |= split[r0, c0] | split[r0, c1] | split[r1, c0] | split[r1, c1]
         if level > 0:  # agreeing grid cells are left to the nearest-sample fill
             _fill_agreeing(ids, r0[~mixed], r1[~mixed], c0[~mixed], c1[~mixed],
                            corners[~mixed, 0])
@@ -65,13 +81,15 @@ def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids):
         if not len(r0):
             break
         rm, cm = (r0 + r1) // 2, (c0 + c1) // 2
-        # A side's midpoint takes the id its two ends agree on; the centre
-        # and the midpoints of disagreeing sides are traced.
+        # A side's midpoint takes the id its two ends agree on (unless an end
+        # is flagged for splitting); the centre and the other midpoints are traced.
         for (ya, xa), (yb, xb), (ym, xm) in (((r0, c0), (r0, c1), (r0, cm)),
                                              ((r1, c0), (r1, c1), (r1, cm)),
                                              ((r0, c0), (r1, c0), (rm, c0)),
                                              ((r0, c1), (r1, c1), (rm, c1))):
             agree = (ids[ya, xa] == ids[yb, xb]) & (ids[ym, xm] < 0)
+            if split is not None:
+                agree &= ~(split[ya, xa] | split[yb, xb])
             ids[ym[agree], xm[agree]] = ids[ya[agree], xa[agree]]
         points = np.concatenate([np.stack([cm, r0], 1), np.stack([c0, rm], 1),
                                  np.stack([cm, rm], 1), np.stack([c1, rm], 1),
@@ -80,6 +98,10 @@ def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids):
         points = points[ids[points[:, 1], points[:, 0]] < 0]
         if len(points):
             new_ids = trace_ids(points)
+            if grid_split is not None:
+                new_ids, new_split = new_ids
+                if split is not None:
+                    split[points[:, 1], points[:, 0]] = new_split
             ids[points[:, 1], points[:, 0]] = new_ids
             traced.append((points, new_ids))
         r0, r1, c0, c1 = (np.concatenate(v) for v in (
@@ -115,12 +137,19 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     extra = []
 
+    curved = trace.curved_mirror
+    if curved is not None:
+        stats["curved_mirror_samples"] = int(curved.sum())
+
     def trace_ids(points):
         more = tracer(points)
         extra.append((points, more))
-        return more.ids(rule)
+        if curved is None:
+            return more.ids(rule)
+        return more.ids(rule), more.curved_mirror
 
-    refined, _ = refine_edges(pattern, grid_ids, trace_ids)
+    refined, _ = refine_edges(pattern, grid_ids, trace_ids,
+                              None if curved is None else curved.reshape(pattern.grid_shape))
     trace_s = sum(more.seconds for _, more in extra)
     id_map = np.where(refined >= 0, refined, pattern.nearest_image(grid_ids))
     edges_s = time.perf_counter() - start - trace_s

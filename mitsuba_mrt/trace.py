@@ -28,12 +28,29 @@ MIRROR_DEPTH = 4
 
 def has_mirrors(scene: mi.Scene) -> bool:
     """True if a shape of ``scene`` has a purely specular (delta) BSDF."""
-    for shape in scene.shapes():
-        bsdf = shape.bsdf()
-        flags = int(bsdf.flags()) if bsdf is not None else 0
-        if mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth):
-            return True
-    return False
+    return any(_is_mirror_bsdf(shape.bsdf()) for shape in scene.shapes())
+
+
+#: Shape types whose mirror reflections keep their size (planar mirrors).
+PLANAR_TYPES = ("Rectangle", "Disk")
+
+
+def curved_mirror_indices(scene: mi.Scene) -> np.ndarray:
+    """1-based indices (as in :func:`ordered_shapes`) of mirrors that are not planar.
+
+    A curved mirror minifies what it reflects: its reflected regions can be
+    thinner than the traced grid, so refinement traces its pixels in full.
+    Meshes count as curved (their facets may point anywhere).
+    """
+    planar = {getattr(mi.ShapeType, name) for name in PLANAR_TYPES}
+    return np.array([k + 1 for k, shape in enumerate(ordered_shapes(scene))
+                     if _is_mirror_bsdf(shape.bsdf()) and shape.shape_type() not in planar],
+                    dtype=np.int64)
+
+
+def _is_mirror_bsdf(bsdf) -> bool:
+    flags = int(bsdf.flags()) if bsdf is not None else 0
+    return mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth)
 
 
 def _is_mirror(bsdf, valid):
@@ -256,8 +273,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         scene, sensor, integrator if radiance else None, sampler, pixel_xy, spp, seed, lights,
         lookup, aovs, rule)
     radiance, albedo, shape_index, visible, path_id = trace
+    curved = curved_mirror_indices(scene) if aovs else np.zeros(0, np.int64)
     return SparseTrace(radiance, albedo, shape_index, visible, len(lights), spp,
-                       time.perf_counter() - start, shadow_rays=rule == "rays", path_id=path_id)
+                       time.perf_counter() - start, shadow_rays=rule == "rays", path_id=path_id,
+                       curved_mirror=np.isin(shape_index, curved) if len(curved) else None)
 
 
 def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,

@@ -38,6 +38,28 @@ def test_refinement_traces_nothing_without_edges():
     assert traced == []
 
 
+def test_flagged_samples_are_traced_down_to_pixels():
+    # one id everywhere (no edge) and a flagged disc (a curved mirror, say):
+    # the disc is traced pixel by pixel, nothing away from it
+    truth = np.ones((60, 80), dtype=np.int64)
+    flagged = disc_ids(60, 80, 40.0, 30.0, 12.0).astype(bool)
+    p = grid_pattern(80, 60, 0.1)
+    seen = np.zeros_like(flagged)
+
+    def trace_ids(points):
+        seen[points[:, 1], points[:, 0]] = True
+        return truth[points[:, 1], points[:, 0]], flagged[points[:, 1], points[:, 0]]
+
+    refine_edges(p, truth[np.ix_(p.rows, p.cols)], trace_ids, flagged[np.ix_(p.rows, p.cols)])
+    seen |= p.mask
+    inner = disc_ids(60, 80, 40.0, 30.0, 12.0 - 4).astype(bool)  # a cell inside the disc
+    outer = disc_ids(60, 80, 40.0, 30.0, 12.0 + 5).astype(bool)  # a cell around it
+    assert seen[inner].all()
+    assert not seen[~outer & ~p.mask].any()
+    # without the flags nothing is traced
+    assert refine_edges(p, truth[np.ix_(p.rows, p.cols)], lambda pts: 1 / 0)[1] == []
+
+
 def test_refine_mode_on_a_sphere_matches_the_full_trace(variant):
     scene = mi.load_string(small_scene_xml(64))
     refined = mitsuba_mrt.render(scene, mode="refine")
