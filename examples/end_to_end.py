@@ -6,6 +6,11 @@
 The full render and each mode run alternately in one process, ``--repeats``
 times after a warm-up; the median times are reported, with the error (the
 report's metric) against the full render of the same spp.
+
+With ``--noise-floor N`` it also renders N full renders with other seeds and
+reports the error of their mean (the converged image, up to its own
+1/sqrt(N) noise) against the full render: the error that even the exact
+image has against a noisy reference, below which no method can go.
 """
 
 import argparse
@@ -22,6 +27,8 @@ def main():
     parser.add_argument("--res", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--modes", default="auto,fast,idpass,refine,bicubic")
+    parser.add_argument("--noise-floor", type=int, default=0, metavar="N",
+                        help="also report the error of the mean of N other-seed renders")
     parser.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE")
     args = parser.parse_args()
 
@@ -49,6 +56,12 @@ def main():
     for mode in modes:
         t = statistics.median(times[mode])
         print(f"{mode:8s} {used[mode]:8s} {t:8.3f} {t / full:8.3f} {errors[mode]:14.5f}")
+    if args.noise_floor > 0:
+        renders = [mitsuba_mrt.render_reference(scene, seed=1000 + k)[0]
+                   for k in range(args.noise_floor)]
+        converged = sum(renders) / len(renders)
+        print(f"noise floor: one other-seed render {paper_error(renders[0], reference):.5f}, "
+              f"mean of {len(renders)} {paper_error(converged, reference):.5f}")
 
 
 if __name__ == "__main__":
