@@ -100,7 +100,7 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
             continue
         pixels = np.flatnonzero(id_map.ravel() == region)
         tree = cKDTree(sample_xy[members])
-        nearest = tree.query(np.stack([pixels % width, pixels // width], axis=1))[1]
+        nearest = tree.query(np.stack([pixels % width, pixels // width], axis=1), workers=-1)[1]
         out.reshape(-1, out.shape[-1])[pixels] = albedo[nearest]
     return out
 

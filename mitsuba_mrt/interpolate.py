@@ -154,7 +154,7 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
             if nearest_tree is None:
                 nearest_tree = cKDTree(sample_xy)
             xy = np.stack([pixels % width, pixels // width], axis=1)
-            out[pixels] = sample_values[nearest_tree.query(xy)[1]]
+            out[pixels] = sample_values[nearest_tree.query(xy, workers=-1)[1]]
             result.counts["no_samples"] += 1
             continue
         lo, hi = sample_bounds[region]
