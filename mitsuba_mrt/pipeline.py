@@ -163,6 +163,8 @@ class Reconstruction:
 
 def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
     """Raise MRTError, naming how many, if any pixel's radiance is NaN or Inf."""
+    if np.isfinite(radiance).all():  # one flat pass: the common case
+        return
     bad = ~np.isfinite(radiance).all(axis=-1)
     if bad.any():
         raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
