@@ -38,7 +38,8 @@ class MRTResult:
     ids : ndarray of int64, shape (height, width)
         Region id of every pixel.
     traced_mask : ndarray of bool, shape (height, width)
-    pattern : SamplePattern
+    pattern : SamplePattern or None
+        The traced grid; None when ``auto`` rendered in full without a pilot.
     trace : SparseTrace
         Radiance and AOVs of the traced pixels.
     params : MRTParams
@@ -55,7 +56,7 @@ class MRTResult:
     image: np.ndarray
     ids: np.ndarray
     traced_mask: np.ndarray
-    pattern: SamplePattern
+    pattern: SamplePattern | None
     trace: SparseTrace
     params: MRTParams
     spp: int
@@ -151,6 +152,11 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     sensor = _sensor(scene, sensor)
     spp = int(spp or sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
+    if mode == "auto":
+        reason = _auto_without_pilot(width, height, spp)
+        if reason is not None:  # decided before any grid work: this path is the full render
+            return _full_fallback(scene, nested, sensor, width, height, None, None, spp, seed,
+                                  params, reason, start)
     pattern = grid_pattern(width, height, params.sample_fraction)
 
     def tracer(pixel_xy, seed_offset=1, aovs=True, radiance=True):
@@ -160,8 +166,8 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     if mode == "auto":
         decision = _auto_decide(pattern, tracer, spp)
         if decision["mode_used"] == "full":
-            return _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params,
-                                  decision, start)
+            return _full_fallback(scene, nested, sensor, width, height, pattern, tracer, spp,
+                                  seed, params, decision, start)
         trace, used = decision.pop("trace"), decision["mode_used"]
     else:
         trace, decision, used = tracer(pattern.pixel_xy, 0), {}, mode
@@ -184,8 +190,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
 def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
     """Decide between refine, idpass and a full render from a measured pilot.
 
-    Small jobs (fewer than ``AUTO_MIN_SAMPLES`` samples), and every job in
-    the scalar variant, are rendered in full without a pilot.  Otherwise the pilot traces the top
+    Called when :func:`_auto_without_pilot` found a pilot worthwhile: the pilot traces the top
     ``1 / AUTO_BAND`` of the image: every pixel with the nested integrator
     alone (what a full render pays; kept as part of the image if the full
     render wins) and the grid rows in it with the id AOVs (what the MRT pays
@@ -198,12 +203,6 @@ def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
     nr, nc = pattern.grid_shape
     width, height = pattern.width, pattern.height
     pixels = width * height
-    if not is_jit():
-        # The scalar variant traces pixel by pixel in Python, while mi.render
-        # runs Mitsuba's multithreaded C++ loop: the MRT cannot win there.
-        return {"mode_used": "full", "auto_reason": "scalar", "pilot_pixels": 0}
-    if pixels * spp < AUTO_MIN_SAMPLES or height < 2 * AUTO_BAND:
-        return {"mode_used": "full", "auto_reason": "small", "pilot_pixels": 0}
     band_height = height // AUTO_BAND
     band_xy = np.stack(np.meshgrid(np.arange(width), np.arange(band_height)), -1).reshape(-1, 2)
     band = tracer(band_xy, 0, False)
@@ -239,7 +238,23 @@ def _auto_decide(pattern: SamplePattern, tracer, spp: int) -> dict:
     return decision
 
 
-def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, decision, start):
+def _auto_without_pilot(width: int, height: int, spp: int) -> dict | None:
+    """``auto``'s decision when no pilot is worth running, else None.
+
+    The scalar variant traces pixel by pixel in Python while ``mi.render``
+    runs Mitsuba's multithreaded C++ loop, so the MRT cannot win there;
+    below ``AUTO_MIN_SAMPLES`` samples the pilot would cost more than the
+    MRT could save.
+    """
+    if not is_jit():
+        return {"mode_used": "full", "auto_reason": "scalar", "pilot_pixels": 0}
+    if width * height * spp < AUTO_MIN_SAMPLES or height < 2 * AUTO_BAND:
+        return {"mode_used": "full", "auto_reason": "small", "pilot_pixels": 0}
+    return None
+
+
+def _full_fallback(scene, nested, sensor, width, height, pattern, tracer, spp, seed, params,
+                   decision, start):
     """The full render that ``auto`` falls back to, as an MRTResult.
 
     Without a pilot it is a plain ``mi.render``.  After a pilot, the pilot's
@@ -248,7 +263,6 @@ def _full_fallback(scene, nested, sensor, pattern, tracer, spp, seed, params, de
     scenes does), so the pilot is not wasted.  Ids are not traced per pixel:
     the pilot's grid ids (or none) are nearest-filled.
     """
-    width, height = pattern.width, pattern.height
     band = decision.pop("band", None)
     pilot_rows, pilot = decision.pop("pilot", (None, None))
     if band is None:
