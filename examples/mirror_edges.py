@@ -14,7 +14,7 @@ import argparse
 import numpy as np
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import error_map
+from mitsuba_mrt.metrics import edge_mask, error_map
 from mitsuba_mrt.trace import ordered_shapes
 
 
@@ -33,11 +33,7 @@ def main():
     full = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0)
     height, width = reference.shape[:2]
     ids = full.trace.ids("exact").reshape(height, width)
-    edge = np.zeros_like(ids, dtype=bool)
-    for a, b in ((np.s_[:, 1:], np.s_[:, :-1]), (np.s_[1:], np.s_[:-1])):
-        differ = ids[a] != ids[b]
-        edge[a] |= differ
-        edge[b] |= differ
+    edge = edge_mask(ids)
     in_mirror = full.trace.shape_index.reshape(height, width) == mirror
     print(f"{args.scene} {width}x{height} [{variant}]: {int((edge & in_mirror).sum())} edge "
           f"pixels in the mirror, {int((edge & ~in_mirror).sum())} outside")

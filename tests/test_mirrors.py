@@ -2,7 +2,7 @@ import mitsuba as mi
 import numpy as np
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import error_map
+from mitsuba_mrt.metrics import edge_mask, error_map
 from conftest import small_scene_xml
 
 # A mirror facing the camera, two spheres behind the camera: they are seen
@@ -47,11 +47,7 @@ def test_refinement_resolves_reflected_edges(variant):
     reference, _ = mitsuba_mrt.render_reference(scene)
     full = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0)
     ids = full.trace.ids("exact").reshape(res, res)
-    edge = np.zeros_like(ids, dtype=bool)
-    for a, b in ((np.s_[:, 1:], np.s_[:, :-1]), (np.s_[1:], np.s_[:-1])):
-        differ = ids[a] != ids[b]
-        edge[a] |= differ
-        edge[b] |= differ
+    edge = edge_mask(ids)
     in_mirror = full.trace.shape_index.reshape(res, res) == mirror_index
     assert (edge & in_mirror).sum() > 100  # the reflections have edges of their own
     refined = mitsuba_mrt.render(scene, mode="refine")
