@@ -123,9 +123,9 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - Polynomial degree added to the RBF: -1 (report), 0 or 1 (Default: -1).
      * - mode
        - |string|
-       - Reconstruction: ``auto`` (the fast MRT when a pilot predicts it
-         beats a full render, else the full render), ``fast``, ``paper``,
-         ``nearest``, ``bicubic`` (Default: auto).
+       - Reconstruction: ``auto`` (``refine`` or ``idpass`` when a pilot
+         predicts it beats a full render, else the full render), ``paper``,
+         ``fast``, ``refine``, ``idpass``, ``nearest``, ``bicubic`` (Default: auto).
      * - aovs
        - |bool|
        - Append the id AOV channels to the output (Default: true).
@@ -168,11 +168,13 @@ class MRTIntegrator(mi.SamplingIntegrator):
         result = render(scene, self.nested, sensor=sensor, spp=int(spp) or None,
                         seed=int(seed), params=self.params, mode=self.mode)
         self.last_result = result
-        channels = [result.image]
-        if self.output_aovs:
-            aovs = aov_images(result)
-            channels += [aovs[name][..., None] for name in self.AOV_NAMES]
-        return mi.TensorXf(np.concatenate(channels, axis=-1).astype(np.float32))
+        aovs = aov_images(result) if self.output_aovs else {}
+        return _develop(self._sensor(scene, sensor).film(), result.image,
+                        [aovs[name] for name in self.aov_names()], self.aov_names())
+
+    @staticmethod
+    def _sensor(scene, sensor):
+        return sensor if isinstance(sensor, mi.Sensor) else scene.sensors()[int(sensor)]
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         # Per-ray queries (e.g. from another integrator) get the nested result.
@@ -184,6 +186,28 @@ class MRTIntegrator(mi.SamplingIntegrator):
     def to_string(self):
         fields = ", ".join(f"{k}={v}" for k, v in self.params.as_dict().items())
         return f"MRTIntegrator[{fields},\n  nested={self.nested}]"
+
+
+def _develop(film, image: np.ndarray, aovs: list, names: list) -> mi.TensorXf:
+    """Put ``image`` and ``aovs`` into ``film`` and develop it, as Mitsuba's own
+    integrators do, so that ``film.bitmap()`` and ``film.write()`` see the MRT's
+    image; returns the developed tensor (R, G, B, then the AOVs).
+
+    Each pixel is one sample of weight 1 at the pixel's own position, so the
+    developed values are the given ones.
+    """
+    channels = film.prepare(names)
+    base = channels - len(names)  # R, G, B, [A,] W
+    if base not in (4, 5):
+        raise MRTError(f"mrt: a film with {base} base channels is not supported "
+                       f"(expected RGB or RGBA)")
+    height, width = image.shape[:2]
+    ones = np.ones((height, width, 1))
+    parts = [image] + [ones] * (base - 3) + [a[..., None] for a in aovs]
+    block = mi.ImageBlock(mi.TensorXf(np.concatenate(parts, axis=-1).astype(np.float32)),
+                          offset=film.crop_offset(), rfilter=film.rfilter(), border=False)
+    film.put_block(block)
+    return film.develop()
 
 
 def aov_images(result) -> dict[str, np.ndarray]:

@@ -141,6 +141,25 @@ def test_mrt_plugin_from_xml(variant):
     assert mitsuba_mrt.render(scene, mode="paper").params.filter_sigma == 1.5
 
 
+@pytest.mark.parametrize("use_scalar", [False, True])
+def test_mrt_plugin_fills_the_film(variant, use_scalar):
+    # mi.render's result, film.bitmap() and film.write() all see the MRT image
+    xml = small_scene_xml(24, integrator="""<integrator type="mrt">
+        <string name="mode" value="fast"/><integrator type="matte"/></integrator>""")
+    try:
+        if use_scalar:
+            mi.set_variant("scalar_rgb")
+        scene = mi.load_string(xml)
+        image = np.array(mi.render(scene))
+        bitmap = np.array(scene.sensors()[0].film().bitmap())
+        reconstructed = scene.integrator().last_result.image
+    finally:
+        mi.set_variant(variant)
+    assert image.shape == bitmap.shape == (24, 24, 7)
+    assert np.allclose(image, bitmap, atol=1e-6)
+    assert np.allclose(image[..., :3], reconstructed, atol=1e-6)
+
+
 def test_mrt_plugin_rejects_bad_parameters(variant):
     for name, value, message in [("sample_fraction", "0", "sample_fraction"),
                                  ("filter_sigma", "-1", "filter_sigma")]:
