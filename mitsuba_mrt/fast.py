@@ -247,7 +247,7 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
         fy, _ = cubic_weights(pattern.rows, pattern.height)
         fx, _ = cubic_weights(pattern.cols, pattern.width)
         stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
-        slow = stencil_id[fy[:, None], fx[None, :]] != id_map
+        slow = stencil_id.take(fy, axis=0).take(fx, axis=1) != id_map  # two 1-D gathers
     for value, fill in (constant or {}).items():
         near_edge = slow & (id_map == value)
         out[near_edge] = fill
