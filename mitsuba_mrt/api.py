@@ -84,7 +84,8 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
         raise MRTError(f"cannot load {path}: {first}") from None
 
 
-def _sensor(scene: mi.Scene, sensor) -> mi.Sensor:
+def resolve_sensor(scene: mi.Scene, sensor) -> mi.Sensor:
+    """``sensor`` itself, or the scene's sensor of that index (checked)."""
     if isinstance(sensor, mi.Sensor):
         return sensor
     sensors = scene.sensors()
@@ -149,7 +150,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         raise MRTError(f"unknown mode {mode!r}; choose one of auto, {', '.join(MODES)}")
     nested, scene_params = nested_integrator(scene, integrator)
     params = (params or scene_params or MRTParams()).with_(**param_overrides)
-    sensor = _sensor(scene, sensor)
+    sensor = resolve_sensor(scene, sensor)
     spp = int(spp or sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     if mode == "auto":
@@ -336,7 +337,7 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
     """
     start = time.perf_counter()
     nested, _ = nested_integrator(scene, integrator)
-    sensor = _sensor(scene, sensor)
+    sensor = resolve_sensor(scene, sensor)
     image = mi.render(scene, integrator=nested, sensor=sensor, seed=seed, spp=int(spp or 0))
     dr.eval(image)
     image = np.array(image, dtype=np.float64)[..., :3]

@@ -161,7 +161,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
         self.last_result = None
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-        from .api import render
+        from .api import render, resolve_sensor
 
         if not develop:
             raise MRTError("mrt: only develop=True is supported")
@@ -169,12 +169,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
                         seed=int(seed), params=self.params, mode=self.mode)
         self.last_result = result
         aovs = aov_images(result) if self.output_aovs else {}
-        return _develop(self._sensor(scene, sensor).film(), result.image,
+        return _develop(resolve_sensor(scene, sensor).film(), result.image,
                         [aovs[name] for name in self.aov_names()], self.aov_names())
-
-    @staticmethod
-    def _sensor(scene, sensor):
-        return sensor if isinstance(sensor, mi.Sensor) else scene.sensors()[int(sensor)]
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         # Per-ray queries (e.g. from another integrator) get the nested result.
