@@ -10,6 +10,8 @@ pattern's ``nearest_rows`` and ``nearest_cols``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import ndimage
 
@@ -26,6 +28,14 @@ def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
     rectangle with no known pixel takes the id of the known pixel of its
     parent that lies nearest to its outer corner (the corner it shares with
     the parent).
+
+    A rectangle of ``[r0, r1) x [c0, c1)`` is split at row
+    ``(r0 + r1) // 2`` (not at all if ``r1 - r0 == 1``) and likewise at a
+    column.  As the split of an interval depends only on the interval, the
+    rectangles at depth ``k`` of the recursion are all cells of one tensor
+    grid (the depth-``k`` row intervals x the depth-``k`` column intervals),
+    so the recursion runs one depth at a time over all its live rectangles
+    at once, with numpy.
 
     Parameters
     ----------
@@ -49,37 +59,142 @@ def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
     if grid_ids.shape != pattern.grid_shape:
         raise MRTError(f"grid_ids has shape {grid_ids.shape}, "
                        f"expected {pattern.grid_shape}")
-    rows, cols = pattern.rows, pattern.cols
-    nearest_rows, nearest_cols = pattern.nearest_rows, pattern.nearest_cols
-    out = np.zeros((pattern.height, pattern.width), dtype=np.int64)
-    stack = [(0, pattern.height, 0, pattern.width)]
-    while stack:
-        r0, r1, c0, c1 = stack.pop()
-        i0, i1 = np.searchsorted(rows, (r0, r1))
-        j0, j1 = np.searchsorted(cols, (c0, c1))
-        block = grid_ids[i0:i1, j0:j1]
-        first = block.flat[0]
-        if (block == first).all():
-            out[r0:r1, c0:c1] = first
-            continue
-        rm = (r0 + r1) // 2 if r1 - r0 > 1 else r1
-        cm = (c0 + c1) // 2 if c1 - c0 > 1 else c1
-        for qr0, qr1, qc0, qc1, corner_r, corner_c in (
-                (r0, rm, c0, cm, r0, c0), (r0, rm, cm, c1, r0, c1 - 1),
-                (rm, r1, c0, cm, r1 - 1, c0), (rm, r1, cm, c1, r1 - 1, c1 - 1)):
-            if qr0 >= qr1 or qc0 >= qc1:
-                continue
-            has_rows = np.searchsorted(rows, qr1) > np.searchsorted(rows, qr0)
-            has_cols = np.searchsorted(cols, qc1) > np.searchsorted(cols, qc0)
-            if has_rows and has_cols:
-                stack.append((qr0, qr1, qc0, qc1))
-            else:
-                # nearest known pixel within the parent: on a sorted axis, the
-                # image-wide nearest grid line clipped into the parent's lines
-                i = min(max(nearest_rows[corner_r], i0), i1 - 1)
-                j = min(max(nearest_cols[corner_c], j0), j1 - 1)
-                out[qr0:qr1, qc0:qc1] = grid_ids[i, j]
-    return out
+    if grid_ids.size == 0:
+        raise MRTError("the pattern has no traced pixel")
+    # depths until every rectangle is a single pixel: an interval of size
+    # s > 1 splits into sizes floor(s / 2) and ceil(s / 2)
+    depth = max(pattern.height - 1, pattern.width - 1).bit_length() + 1
+    row_levels = _interval_levels(pattern.height, pattern.rows, pattern.nearest_rows, depth)
+    col_levels = _interval_levels(pattern.width, pattern.cols, pattern.nearest_cols, depth)
+
+    # summed-area tables of "differs from the grid pixel to the right" and
+    # "differs from the grid pixel below", with a leading row and column of
+    # zeros: a block is uniform iff both counts inside it are zero
+    right = np.zeros((grid_ids.shape[0] + 1, grid_ids.shape[1]), dtype=np.int64)
+    np.cumsum(grid_ids[:, 1:] != grid_ids[:, :-1], axis=0, out=right[1:, 1:])
+    np.cumsum(right[1:, 1:], axis=1, out=right[1:, 1:])
+    below = np.zeros((grid_ids.shape[0], grid_ids.shape[1] + 1), dtype=np.int64)
+    np.cumsum(grid_ids[1:] != grid_ids[:-1], axis=0, out=below[1:, 1:])
+    np.cumsum(below[1:, 1:], axis=1, out=below[1:, 1:])
+
+    # values[a, b]: id of the cell (row interval a, column interval b) of the
+    # current depth, valid where the cell or one of its ancestors is finished
+    values = np.zeros((1, 1), dtype=np.int64)
+    live_a = live_b = np.zeros(1, dtype=np.intp)  # cells still to be tested
+    empty_a = empty_b = np.zeros(0, dtype=np.intp)  # cells without a grid pixel
+    for k in range(depth):
+        rl, cl = row_levels[k], col_levels[k]
+        if k > 0:
+            # a finished parent's id covers its children; then paint the
+            # children of split parents that hold no grid pixel
+            values = values.take(cl.parent, axis=1).take(rl.parent, axis=0)
+            values[empty_a, empty_b] = grid_ids[rl.fill_index[empty_a], cl.fill_index[empty_b]]
+        # test the live cells: all ids in their grid block equal?
+        i0, i1 = rl.grid_start[live_a], rl.grid_start[live_a + 1]
+        j0, j1 = cl.grid_start[live_b], cl.grid_start[live_b + 1]
+        n_differ = (right[i1, j1 - 1] - right[i0, j1 - 1] - right[i1, j0] + right[i0, j0]
+                    + below[i1 - 1, j1] - below[i0, j1] - below[i1 - 1, j0] + below[i0, j0])
+        uniform = n_differ == 0
+        values[live_a[uniform], live_b[uniform]] = grid_ids[i0[uniform], j0[uniform]]
+        split_a, split_b = live_a[~uniform], live_b[~uniform]
+        if len(split_a) == 0:
+            break
+        # the (up to) four children of each split cell, at depth k + 1
+        rl_next, cl_next = row_levels[k + 1], col_levels[k + 1]
+        child_a, child_b = [], []
+        for da in (0, 1):
+            for db in (0, 1):
+                exists = (da < rl.n_children[split_a]) & (db < cl.n_children[split_b])
+                child_a.append(rl.first_child[split_a[exists]] + da)
+                child_b.append(cl.first_child[split_b[exists]] + db)
+        child_a, child_b = np.concatenate(child_a), np.concatenate(child_b)
+        has_grid = rl_next.has_lines[child_a] & cl_next.has_lines[child_b]
+        live_a, live_b = child_a[has_grid], child_b[has_grid]
+        empty_a, empty_b = child_a[~has_grid], child_b[~has_grid]
+    # expand the cells of the last depth reached to pixels
+    if values.shape != (pattern.height, pattern.width):
+        row_cell = np.repeat(np.arange(len(rl.has_lines)), np.diff(rl.bounds))
+        col_cell = np.repeat(np.arange(len(cl.has_lines)), np.diff(cl.bounds))
+        values = values.take(col_cell, axis=1).take(row_cell, axis=0)
+    return values
+
+
+@dataclass(frozen=True)
+class _IntervalLevel:
+    """One depth of the 1-D subdivision of an image axis (see quadtree_fill).
+
+    Attributes
+    ----------
+    bounds : ndarray of int64, shape (n + 1,)
+        The n intervals are ``[bounds[a], bounds[a + 1])``.
+    grid_start : ndarray of intp, shape (n + 1,)
+        Interval a holds the grid lines ``grid_start[a] : grid_start[a + 1]``.
+    has_lines : ndarray of bool, shape (n,)
+        Whether the interval holds a grid line.
+    parent : ndarray of intp, shape (n,)
+        Index of the interval's parent at the previous depth (0 at depth 0).
+    fill_index : ndarray of intp, shape (n,)
+        Grid line nearest to the interval's outer corner (its parent's first
+        pixel for a first child, else the parent's last pixel), clipped into
+        the parent's grid lines; meaningless at depth 0 and where the parent
+        holds no grid line.
+    n_children : ndarray of intp, shape (n,)
+        2 where the interval is split at the next depth, else 1.
+    first_child : ndarray of intp, shape (n,)
+        Index of the interval's first child at the next depth.
+    """
+
+    bounds: np.ndarray
+    grid_start: np.ndarray
+    has_lines: np.ndarray
+    parent: np.ndarray
+    fill_index: np.ndarray
+    n_children: np.ndarray
+    first_child: np.ndarray
+
+
+def _interval_levels(length: int, lines: np.ndarray, nearest: np.ndarray,
+                     depth: int) -> list[_IntervalLevel]:
+    """Subdivide ``[0, length)`` by halving, as quadtree_fill does.
+
+    Parameters
+    ----------
+    length : int
+        Image size along the axis.
+    lines : ndarray of int, sorted
+        Grid lines (``pattern.rows`` or ``pattern.cols``).
+    nearest : ndarray of int, shape (length,)
+        Index into ``lines`` of the line nearest to each pixel.
+    depth : int
+        Number of levels to return; levels past the one where every interval
+        is a single pixel repeat it (each interval is its own only child).
+
+    Returns
+    -------
+    list of _IntervalLevel
+        Depth 0 (the whole axis) to ``depth - 1``.
+    """
+    levels = []
+    bounds = np.array([0, length], dtype=np.int64)
+    parent = fill_index = np.zeros(1, dtype=np.intp)
+    for _ in range(depth):
+        grid_start = np.searchsorted(lines, bounds)
+        is_split = np.diff(bounds) > 1
+        n_children = np.where(is_split, 2, 1).astype(np.intp)
+        first_child = np.cumsum(n_children) - n_children
+        levels.append(_IntervalLevel(bounds, grid_start, grid_start[1:] > grid_start[:-1],
+                                     parent, fill_index, n_children, first_child))
+        # children: a split interval [r0, r1) gives [r0, rm) and [rm, r1),
+        # rm = (r0 + r1) // 2; the second child's outer corner is r1 - 1
+        split = np.flatnonzero(is_split)
+        parent = np.repeat(np.arange(len(is_split)), n_children)
+        is_first = np.ones(len(parent), dtype=bool)
+        is_first[first_child[split] + 1] = False
+        corner = np.where(is_first, bounds[parent], bounds[parent + 1] - 1)
+        fill_index = np.minimum(np.maximum(nearest[corner], grid_start[parent]),
+                                grid_start[parent + 1] - 1)
+        bounds = np.insert(bounds, split + 1, (bounds[split] + bounds[split + 1]) // 2)
+    return levels
 
 
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,

@@ -64,6 +64,101 @@ def test_grid_shape_checked():
         quadtree_fill(pattern(4, 4, [0, 3], [0, 3]), np.zeros((3, 3)))
 
 
+def test_empty_grid_rejected():
+    with pytest.raises(MRTError, match="no traced pixel"):
+        quadtree_fill(pattern(4, 4, [], [0, 3]), np.zeros((0, 2)))
+
+
+def _quadtree_fill_reference(p, grid_ids):
+    """The previous loop version of quadtree_fill, kept to check the vectorised one.
+
+    A stack of rectangles ``(r0, r1, c0, c1)``; each is filled if its grid
+    block is uniform, else split into (up to) four quadrants, of which those
+    without a grid row or column take the id of the parent's grid pixel
+    nearest to their outer corner.
+    """
+    grid_ids = np.asarray(grid_ids, dtype=np.int64)
+    rows, cols = p.rows, p.cols
+    nearest_rows, nearest_cols = p.nearest_rows, p.nearest_cols
+    out = np.zeros((p.height, p.width), dtype=np.int64)
+    stack = [(0, p.height, 0, p.width)]
+    while stack:
+        r0, r1, c0, c1 = stack.pop()
+        i0, i1 = np.searchsorted(rows, (r0, r1))
+        j0, j1 = np.searchsorted(cols, (c0, c1))
+        block = grid_ids[i0:i1, j0:j1]
+        first = block.flat[0]
+        if (block == first).all():
+            out[r0:r1, c0:c1] = first
+            continue
+        rm = (r0 + r1) // 2 if r1 - r0 > 1 else r1
+        cm = (c0 + c1) // 2 if c1 - c0 > 1 else c1
+        for qr0, qr1, qc0, qc1, corner_r, corner_c in (
+                (r0, rm, c0, cm, r0, c0), (r0, rm, cm, c1, r0, c1 - 1),
+                (rm, r1, c0, cm, r1 - 1, c0), (rm, r1, cm, c1, r1 - 1, c1 - 1)):
+            if qr0 >= qr1 or qc0 >= qc1:
+                continue
+            has_rows = np.searchsorted(rows, qr1) > np.searchsorted(rows, qr0)
+            has_cols = np.searchsorted(cols, qc1) > np.searchsorted(cols, qc0)
+            if has_rows and has_cols:
+                stack.append((qr0, qr1, qc0, qc1))
+            else:
+                i = min(max(nearest_rows[corner_r], i0), i1 - 1)
+                j = min(max(nearest_cols[corner_c], j0), j1 - 1)
+                out[qr0:qr1, qc0:qc1] = grid_ids[i, j]
+    return out
+
+
+def _random_lines(rng, length):
+    """Sorted unique grid lines in [0, length): sparse, dense or clustered."""
+    kind = rng.integers(3)
+    if kind == 0:
+        n = rng.integers(1, length + 1)
+        lines = rng.choice(length, size=n, replace=False)
+    elif kind == 1:
+        lines = rng.choice(length, size=rng.integers(1, min(length, 3) + 1), replace=False)
+    else:  # a cluster in one part of the axis
+        lo = rng.integers(length)
+        hi = rng.integers(lo, length) + 1
+        lines = rng.choice(np.arange(lo, hi), size=rng.integers(1, hi - lo + 1), replace=False)
+    return np.sort(lines).astype(np.int64)
+
+
+def _random_ids(rng, p):
+    """Grid ids: noise of few ids, a blocky image sampled at the grid, or huge ids."""
+    kind = rng.integers(4)
+    if kind == 0:
+        return rng.integers(0, rng.integers(1, 4), p.grid_shape)
+    if kind == 1:  # a few random rectangles painted over a background
+        image = np.zeros((p.height, p.width), dtype=np.int64)
+        for value in range(1, rng.integers(1, 6)):
+            r0, c0 = rng.integers(p.height), rng.integers(p.width)
+            image[r0:r0 + rng.integers(1, p.height + 1), c0:c0 + rng.integers(1, p.width + 1)] = value
+        return image[np.ix_(p.rows, p.cols)]
+    if kind == 2:  # a coarse random image, upsampled
+        coarse = rng.integers(0, 3, (rng.integers(1, 6), rng.integers(1, 6)))
+        image = coarse[np.arange(p.height) * coarse.shape[0] // p.height][
+            :, np.arange(p.width) * coarse.shape[1] // p.width]
+        return image[np.ix_(p.rows, p.cols)]
+    values = np.array([-2 ** 63, 2 ** 62 + 1, -5, 7], dtype=np.int64)
+    return values[rng.integers(0, 2, p.grid_shape) * rng.integers(1, 4)]
+
+
+def test_vectorised_fill_matches_reference_loop():
+    rng = np.random.default_rng(12345)
+    for case in range(500):
+        h, w = rng.integers(1, 61, 2)
+        if case % 10 == 0:  # one-pixel-wide images
+            h, w = (1, w) if case % 20 == 0 else (h, 1)
+        if rng.random() < 0.5:
+            p = grid_pattern(w, h, rng.choice([rng.random(), rng.random() * 0.05, 1.0]) or 1.0)
+        else:
+            p = SamplePattern(int(w), int(h), _random_lines(rng, h), _random_lines(rng, w))
+        grid = _random_ids(rng, p)
+        expected = _quadtree_fill_reference(p, grid)
+        assert np.array_equal(quadtree_fill(p, grid), expected), (case, h, w, p)
+
+
 def naive_smooth(ids, sigma, cutoff):
     out = ids.copy()
     for v in np.unique(ids):
