@@ -15,6 +15,7 @@ from scipy.spatial.distance import cdist
 
 from . import rbf_fast
 from .errors import MRTError
+from .rbf_solve import solve_linear_rbf
 
 #: Elements of the distance matrix evaluated at once (about 32 MB of float64).
 EVAL_BLOCK_ELEMENTS = 1 << 22
@@ -68,18 +69,11 @@ class LinearRBF:
         self._centres = (centres - self._shift) / self._scale
         self._degree = degree
         self._basis = self._polynomial_basis(self._centres, degree)
-        n, m = len(centres), self._poly(self._centres[:1]).shape[1]
-        system = np.zeros((n + m, n + m))
-        system[:n, :n] = cdist(self._centres, self._centres)
-        system[:n, n:] = self._poly(self._centres)
-        system[n:, :n] = system[:n, n:].T
-        rhs = np.zeros((n + m, values.shape[1]))
-        rhs[:n] = values
         try:
-            coeffs = scipy.linalg.solve(system, rhs, assume_a="sym")
+            self._weights, self._poly_coeffs = solve_linear_rbf(
+                cdist(self._centres, self._centres), self._poly(self._centres), values)
         except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
             raise MRTError("RBF system is singular: centres must be distinct") from None
-        self._weights, self._poly_coeffs = coeffs[:n], coeffs[n:]
 
     @staticmethod
     def _polynomial_basis(points: np.ndarray, degree: int) -> np.ndarray:

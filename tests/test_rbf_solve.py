@@ -1,0 +1,56 @@
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.spatial.distance import cdist
+
+from mitsuba_mrt import rbf_solve
+
+rng = np.random.default_rng(7)
+
+
+def pixel_system(n, degree, seed=0):
+    """A linear-RBF system like the paper mode's: n distinct pixels of a sparse grid, scaled."""
+    r = np.random.default_rng(seed)
+    grid = np.stack(np.meshgrid(np.arange(0, 600, 3), np.arange(0, 300, 3)), -1).reshape(-1, 2)
+    xy = grid[r.choice(len(grid), n, replace=False)].astype(float)
+    xy = (xy - xy.mean(0)) / (np.ptp(xy, 0).max() / 2)
+    poly = np.zeros((n, 0)) if degree < 0 else np.hstack([np.ones((n, 1)), xy])[:, :1 + 2 * degree]
+    values = np.stack([np.sin(4 * xy[:, 0]), xy[:, 1] ** 2, np.ones(n)], axis=1)
+    return cdist(xy, xy), poly, values
+
+
+def lu_reference(distances, poly, values):
+    n, m = poly.shape
+    system = np.block([[distances, poly], [poly.T, np.zeros((m, m))]])
+    out = scipy.linalg.solve(system, np.vstack([values, np.zeros((m, values.shape[1]))]))
+    return out[:n], out[n:]
+
+
+@pytest.mark.parametrize("degree", [-1, 0, 1])
+@pytest.mark.parametrize("n", [150, 900])
+def test_refined_cholesky_matches_float64_lu(degree, n):
+    system = pixel_system(n, degree, seed=n)
+    solved = rbf_solve._refined_cholesky(*system)
+    assert solved is not None  # the fast path was taken, not the LU fallback
+    ref = lu_reference(*system)
+    for ours, theirs in zip(solved, ref):
+        assert np.abs(ours - theirs).max(initial=0.0) <= 1e-9 * np.abs(ref[0]).max()
+    distances, poly, values = system
+    assert np.allclose(distances @ solved[0] + poly @ solved[1], values, rtol=0, atol=1e-10)
+    assert np.allclose(poly.T @ solved[0], 0.0, atol=1e-10)
+
+
+def test_repeated_centres_fall_back_and_raise():
+    distances, poly, values = pixel_system(200, 0)
+    xy_dup = np.vstack([np.zeros((1, 2)), np.zeros((1, 2)), rng.uniform(-1, 1, (198, 2))])
+    distances = cdist(xy_dup, xy_dup)
+    assert rbf_solve._refined_cholesky(distances, poly, values) is None
+    with pytest.raises((np.linalg.LinAlgError, scipy.linalg.LinAlgError)):
+        rbf_solve.solve_linear_rbf(distances, poly, values)
+
+
+def test_small_systems_use_lu_and_agree():
+    system = pixel_system(rbf_solve.MIN_SIZE - 1, 1)
+    ours = rbf_solve.solve_linear_rbf(*system)
+    ref = lu_reference(*system)
+    assert np.allclose(ours[0], ref[0], rtol=0, atol=1e-12 * np.abs(ref[0]).max())
