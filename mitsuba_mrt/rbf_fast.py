@@ -30,6 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 import scipy.fft
+import scipy.linalg
 import scipy.sparse
 
 from .errors import MRTError
@@ -268,7 +269,11 @@ def _far_field(ccell, cres, weights, ncell, act_keys, h, q):
     patch = (node[:, None] * shape[1] + node[None, :] + s_size[1] - 1).ravel()
     patch = (act_keys // ncell[1] * shape[1] + act_keys % ncell[1])[:, None] + patch
     tensor = _tensor_weights(h, q)
-    return np.stack([field[ch][patch] @ tensor for ch in range(k)])
+    # (patch @ tensor)' = tensor' @ patch': Fortran views, so scipy's BLAS copies
+    # nothing; numpy's matmul would wake numpy's own BLAS threads, which then
+    # compete for the cores with scipy's, still spinning after the RBF solves
+    return np.stack([scipy.linalg.blas.dgemm(1.0, tensor.T, field[ch][patch].T).T
+                     for ch in range(k)])
 
 
 def _near_field(ccell, cres, weights, ncell, lookup, nact, h, q, radius):
