@@ -72,7 +72,7 @@ def region_values(id_map: np.ndarray, sample_ids: np.ndarray, sample_values: np.
 
 
 def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndarray,
-                  sample_albedo: np.ndarray) -> np.ndarray:
+                  sample_albedo: np.ndarray, nearest: np.ndarray | None = None) -> np.ndarray:
     """Per-pixel albedo estimated from the samples of the pixel's own id.
 
     A region whose samples all share one albedo (the usual case: one shape
@@ -81,6 +81,11 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
     each pixel, the albedo of the nearest sample of the same id.  Ids that
     no sample carries get 1 (no modulation).
 
+    ``nearest`` (height, width), optional: index of each pixel's nearest
+    sample of any id (:meth:`SamplePattern.nearest_image` of the sample
+    indices).  Where that sample has the pixel's id it is also the nearest
+    of the same id, so only the other pixels need a k-d tree query.
+
     Examples
     --------
     >>> xy = np.array([[0, 0], [1, 0]])
@@ -88,9 +93,10 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
     array([0.2, 0.4, 1. ])
     """
     sample_albedo = safe_albedo(sample_albedo)
+    sample_ids = np.asarray(sample_ids)
     out = region_values(id_map, sample_ids, sample_albedo, "first", 1.0)
     order = np.argsort(sample_ids, kind="stable")
-    regions, starts = np.unique(np.asarray(sample_ids)[order], return_index=True)
+    regions, starts = np.unique(sample_ids[order], return_index=True)
     ends = np.append(starts[1:], len(order))
     width = id_map.shape[1]
     for region, lo, hi in zip(regions.tolist(), starts, ends):
@@ -99,9 +105,16 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
         if np.ptp(albedo, axis=0).max() <= ALBEDO_EPS:
             continue
         pixels = np.flatnonzero(id_map.ravel() == region)
+        if nearest is not None:
+            candidate = nearest.ravel()[pixels]
+            same = sample_ids[candidate] == region
+            out.reshape(-1, out.shape[-1])[pixels[same]] = sample_albedo[candidate[same]]
+            pixels = pixels[~same]
+            if len(pixels) == 0:
+                continue
         tree = cKDTree(sample_xy[members])
-        nearest = tree.query(np.stack([pixels % width, pixels // width], axis=1), workers=-1)[1]
-        out.reshape(-1, out.shape[-1])[pixels] = albedo[nearest]
+        closest = tree.query(np.stack([pixels % width, pixels // width], axis=1), workers=-1)[1]
+        out.reshape(-1, out.shape[-1])[pixels] = albedo[closest]
     return out
 
 

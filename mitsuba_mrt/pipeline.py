@@ -202,8 +202,9 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
         ids, pattern.pixel_xy, sample_ids, demodulate(trace.radiance, trace.albedo),
         max_inpoints=params.max_inpoints, num_cappoints=params.num_cappoints,
         rbf_degree=params.rbf_degree)
-    image = compose(interp.values, region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo),
-                    pattern.mask, trace.radiance)
+    albedo = region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo,
+                           nearest=pattern.nearest_image(np.arange(pattern.count)))
+    image = compose(interp.values, albedo, pattern.mask, trace.radiance)
     timings["interpolate"] = time.perf_counter() - start
     stats.update(interp.counts)
     stats["regions"] = int(len(np.unique(ids)))

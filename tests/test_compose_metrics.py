@@ -52,3 +52,19 @@ def test_compose_keeps_traced_pixels():
     mask = np.array([[True, False]])
     out = compose(np.ones((1, 2, 3)), np.full((1, 2, 3), 0.5), mask, np.array([[9.0, 9, 9]]))
     assert out[0, 0].tolist() == [9, 9, 9] and out[0, 1].tolist() == [0.5] * 3
+
+
+def test_region_albedo_with_nearest_grid_sample_takes_a_nearest_sample_of_the_same_id():
+    from mitsuba_mrt.sampling import grid_pattern
+
+    rng = np.random.default_rng(3)
+    p = grid_pattern(37, 29, 0.1)
+    sid = rng.integers(1, 4, p.count)
+    alb = rng.uniform(0.1, 0.9, (p.count, 1))
+    ids = p.nearest_image(sid)
+    ids[rng.random(ids.shape) < 0.2] = 2  # pixels whose nearest sample has another id
+    out = region_albedo(ids, p.pixel_xy, sid, alb, nearest=p.nearest_image(np.arange(p.count)))
+    for r, c in np.ndindex(ids.shape):
+        same = np.flatnonzero(sid == ids[r, c])
+        d2 = ((p.pixel_xy[same] - (c, r)) ** 2).sum(axis=1)
+        assert out[r, c, 0] in alb[same[d2 == d2.min()], 0]
