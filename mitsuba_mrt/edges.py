@@ -197,6 +197,31 @@ def _interval_levels(length: int, lines: np.ndarray, nearest: np.ndarray,
     return levels
 
 
+def region_boxes(pattern: SamplePattern, grid_ids: np.ndarray) -> dict:
+    """Pixel bounding box (r0, r1, c0, c1) of each id, for :func:`smooth_ids`.
+
+    Holds for the nearest-sample fill and for :func:`quadtree_fill`: either
+    gives a pixel an id only from a traced pixel of that id on a grid line
+    next to it, so an id's pixels lie between the grid lines on either side
+    of its outermost samples, and the box reaches one grid line beyond them.
+    """
+    nr, nc = grid_ids.shape
+    flat = grid_ids.ravel()
+    order = np.argsort(flat, kind="stable")
+    values, starts = np.unique(flat[order], return_index=True)
+    gy, gx = np.divmod(order, nc)
+    lo_y = np.minimum.reduceat(gy, starts)
+    hi_y = np.maximum.reduceat(gy, starts)
+    lo_x = np.minimum.reduceat(gx, starts)
+    hi_x = np.maximum.reduceat(gx, starts)
+    rows, cols = pattern.rows, pattern.cols
+    r0 = np.where(lo_y > 0, rows[np.maximum(lo_y - 1, 0)], 0)
+    r1 = np.where(hi_y < nr - 1, rows[np.minimum(hi_y + 1, nr - 1)] + 1, pattern.height)
+    c0 = np.where(lo_x > 0, cols[np.maximum(lo_x - 1, 0)], 0)
+    c1 = np.where(hi_x < nc - 1, cols[np.minimum(hi_x + 1, nc - 1)] + 1, pattern.width)
+    return {int(v): (int(a), int(b), int(c), int(d)) for v, a, b, c, d in zip(values, r0, r1, c0, c1)}
+
+
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
                filter_cutoff: float = 0.05, background: int = 0,
                boxes: dict | None = None) -> np.ndarray:

@@ -29,7 +29,7 @@ from scipy import sparse
 
 from . import fast_jit
 from .compose import ALBEDO_EPS, safe_albedo
-from .edges import smooth_ids
+from .edges import region_boxes, smooth_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
 
@@ -104,29 +104,6 @@ def separable_cubic(pattern: SamplePattern, grid_values: np.ndarray) -> np.ndarr
         by_column.reshape(pattern.width, nr, channels).transpose(1, 0, 2))
     return (wy @ by_row.reshape(nr, pattern.width * channels)).reshape(
         pattern.height, pattern.width, channels)
-
-
-def region_boxes(pattern: SamplePattern, grid_ids: np.ndarray) -> dict:
-    """Pixel bounding box (r0, r1, c0, c1) of each id of the nearest-sample fill.
-
-    An id's pixels lie between the grid lines on either side of its
-    outermost samples, so the box reaches one grid line beyond them.
-    """
-    nr, nc = grid_ids.shape
-    flat = grid_ids.ravel()
-    order = np.argsort(flat, kind="stable")
-    values, starts = np.unique(flat[order], return_index=True)
-    gy, gx = np.divmod(order, nc)
-    lo_y = np.minimum.reduceat(gy, starts)
-    hi_y = np.maximum.reduceat(gy, starts)
-    lo_x = np.minimum.reduceat(gx, starts)
-    hi_x = np.maximum.reduceat(gx, starts)
-    rows, cols = pattern.rows, pattern.cols
-    r0 = np.where(lo_y > 0, rows[np.maximum(lo_y - 1, 0)], 0)
-    r1 = np.where(hi_y < nr - 1, rows[np.minimum(hi_y + 1, nr - 1)] + 1, pattern.height)
-    c0 = np.where(lo_x > 0, cols[np.maximum(lo_x - 1, 0)], 0)
-    c1 = np.where(hi_x < nc - 1, cols[np.minimum(hi_x + 1, nc - 1)] + 1, pattern.width)
-    return {int(v): (int(a), int(b), int(c), int(d)) for v, a, b, c, d in zip(values, r0, r1, c0, c1)}
 
 
 def _uniform_blocks(grid_ids: np.ndarray, size: int) -> np.ndarray:

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .compose import compose, demodulate, region_albedo
-from .edges import quadtree_fill, smooth_ids
+from .edges import quadtree_fill, region_boxes, smooth_ids
 from .errors import MRTError
 from .ids import ID_RULES, encode_ids
 from .interpolate import interpolate_regions
@@ -193,8 +193,9 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
         ids = np.full((pattern.height, pattern.width), sample_ids[0], dtype=np.int64)
         stats["skipped_edge_finding"] += 1
     else:
-        ids = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))
-        ids = smooth_ids(ids, params.filter_sigma, params.filter_cutoff)
+        grid_ids = sample_ids.reshape(pattern.grid_shape)
+        ids = smooth_ids(quadtree_fill(pattern, grid_ids), params.filter_sigma,
+                         params.filter_cutoff, boxes=region_boxes(pattern, grid_ids))
     timings["edges"] = time.perf_counter() - start
 
     start = time.perf_counter()

@@ -3,8 +3,8 @@ import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
 from mitsuba_mrt import fast_jit
-from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, region_boxes, separable_cubic
-from mitsuba_mrt.edges import smooth_ids
+from mitsuba_mrt.edges import quadtree_fill, region_boxes, smooth_ids
+from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, separable_cubic
 
 
 def trace_from(pattern, values, shape_index=None, albedo=None):
@@ -53,11 +53,15 @@ def test_interpolation_never_crosses_an_edge():
     assert np.allclose(out[..., 0][id_map == 2], 1.0, atol=1e-9)
 
 
-def test_region_boxes_hold_every_pixel_of_each_id():
-    p = grid_pattern(70, 45, 0.08)
-    rng = np.random.default_rng(3)
+@pytest.mark.parametrize("fill", ["nearest", "quadtree"])
+@pytest.mark.parametrize("seed", range(4))
+def test_region_boxes_hold_every_pixel_of_each_id(fill, seed):
+    rng = np.random.default_rng(seed)
+    p = grid_pattern(int(rng.integers(20, 90)), int(rng.integers(20, 90)), rng.uniform(0.03, 0.3))
     ids = rng.integers(0, 5, p.grid_shape)
-    id_map = p.nearest_image(ids)
+    if seed % 2:  # blocky ids, as real regions are
+        ids = np.repeat(np.repeat(ids, 4, axis=0), 4, axis=1)[:p.grid_shape[0], :p.grid_shape[1]]
+    id_map = p.nearest_image(ids) if fill == "nearest" else quadtree_fill(p, ids)
     for value, (r0, r1, c0, c1) in region_boxes(p, ids).items():
         inside = np.zeros_like(id_map, dtype=bool)
         inside[r0:r1, c0:c1] = True
