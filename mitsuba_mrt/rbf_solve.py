@@ -124,16 +124,22 @@ def _refined_cholesky(distances, poly, values):
         y = blas.ssymv(1.0, negated, v32, lower=1).astype(np.float64)
         z = 2.0 * y - 2.0 * (v @ y) * v  # H M H = M - v z' - z v'
         negated = blas.ssyr2(-1.0, v32, z.astype(np.float32), a=negated, lower=1, overwrite_a=1)
-    factor, info = lapack.spotrf(np.asfortranarray(negated[q:, q:]), lower=1, overwrite_a=1,
-                                 clean=0)
+    # Factor -Q2' A Q2 in place: an identity on the first q rows and columns
+    # makes the whole matrix block diagonal, which spares copying out the block.
+    negated[:q] = 0.0
+    negated[:, :q] = 0.0
+    negated[range(q), range(q)] = 1.0
+    factor, info = lapack.spotrf(negated, lower=1, overwrite_a=1, clean=0)
     if info != 0:  # not positive definite in float32: singular or too ill-conditioned
         return None
 
     def solve_s(rhs):  # S^-1 rhs for S = Q2' A Q2 (negative definite); columns one by one
         out = np.empty(rhs.shape)
+        padded = np.zeros(n, dtype=np.float32)
         for j in range(rhs.shape[1]):
-            half = blas.strsv(factor, rhs[:, j].astype(np.float32), lower=1)
-            out[:, j] = blas.strsv(factor, half, lower=1, trans=1)
+            padded[q:] = rhs[:, j]
+            half = blas.strsv(factor, padded, lower=1)
+            out[:, j] = blas.strsv(factor, half, lower=1, trans=1)[q:]
         return -out
 
     # A x column by column: gemv, several times faster than gemm for a few columns,
@@ -168,22 +174,39 @@ def _refined_cholesky(distances, poly, values):
                 r_factor, _reflect(vectors, res_f, transpose=True)[:q] - a_q1.T @ w)
             return w, c
 
-    scale = max(float(np.abs(values).max()), np.finfo(float).tiny)
+    # Refine each column until its residual is TOLERANCE of the data's largest
+    # value.  Columns are first made small where they can be: the others minus
+    # their projection on the largest (colour channels are often nearly equal),
+    # so they converge in a step or two and leave the loop.
+    values = values.astype(np.float64)
+    scale = float(np.abs(values).max())
+    if scale == 0.0 or not np.isfinite(scale):
+        return (np.zeros((n, k)), np.zeros((m, k))) if scale == 0.0 else None
+    lead = int(np.argmax(np.abs(values).max(axis=0)))
+    share = values[:, lead] @ values / (values[:, lead] @ values[:, lead])
+    share[lead] = 0.0
+    data = values - np.outer(values[:, lead], share)
     weights, coeffs = np.zeros((n, k)), np.zeros((m, k))
-    res_f, res_g = values.astype(np.float64), np.zeros((m, k))
-    previous = np.inf
+    res_f, res_g = data.copy(), np.zeros((m, k))
+    active = np.arange(k)
+    previous = np.full(k, np.inf)
     for _ in range(MAX_STEPS):
-        dw, dc = approximate(res_f, res_g)
-        weights += dw
-        coeffs += dc
-        res_f = values - product(weights) - poly @ coeffs
-        res_g = -(poly.T @ weights)
-        residual = max(float(np.abs(res_f).max()), float(np.abs(res_g).max(initial=0.0))) / scale
-        if not np.isfinite(residual):
+        dw, dc = approximate(res_f[:, active], res_g[:, active])
+        weights[:, active] += dw
+        coeffs[:, active] += dc
+        res_f[:, active] = data[:, active] - product(weights[:, active]) - poly @ coeffs[:, active]
+        res_g[:, active] = -(poly.T @ weights[:, active])
+        residual = np.maximum(np.abs(res_f[:, active]).max(axis=0),
+                              np.abs(res_g[:, active]).max(axis=0, initial=0.0)) / scale
+        if not np.isfinite(residual).all():
             return None
-        if residual <= TOLERANCE:
-            return weights, coeffs
-        if residual > 0.5 * previous:  # stalled: at the float64 floor, or diverging
-            return (weights, coeffs) if residual <= ACCEPTABLE else None
-        previous = residual
+        stalled = residual > 0.5 * previous[active]  # at the float64 floor, or diverging
+        if (stalled & (residual > ACCEPTABLE)).any():
+            return None
+        previous[active] = residual
+        active = active[(residual > TOLERANCE) & ~stalled]
+        if len(active) == 0:
+            # back to the original columns: solution of f_j = data_j + share_j f_lead
+            return (weights + np.outer(weights[:, lead], share),
+                    coeffs + np.outer(coeffs[:, lead], share))
     return None
