@@ -94,27 +94,34 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
     """
     sample_albedo = safe_albedo(sample_albedo)
     sample_ids = np.asarray(sample_ids)
-    out = region_values(id_map, sample_ids, sample_albedo, "first", 1.0)
-    order = np.argsort(sample_ids, kind="stable")
-    regions, starts = np.unique(sample_ids[order], return_index=True)
-    ends = np.append(starts[1:], len(order))
+    regions, first, inverse = np.unique(sample_ids, return_index=True, return_inverse=True)
+    order = np.argsort(inverse, kind="stable")
+    starts = np.searchsorted(inverse[order], np.arange(len(regions)))
+    spread = (np.maximum.reduceat(sample_albedo[order], starts)
+              - np.minimum.reduceat(sample_albedo[order], starts)).max(axis=1)
+    varies = spread > ALBEDO_EPS
+    out = np.empty(id_map.shape + sample_albedo.shape[1:])
+    flat_out = out.reshape(-1, sample_albedo.shape[1])
+    rest = np.arange(id_map.size)
+    if nearest is not None:
+        # where the nearest sample carries the pixel's id, it is the answer for a
+        # varying region; a constant one takes its first sample's, as below
+        candidate = nearest.ravel()
+        per_sample = np.where(varies[inverse][:, None], sample_albedo,
+                              sample_albedo[first[inverse]])
+        np.take(per_sample, candidate, axis=0, out=flat_out)  # then mend the others
+        rest = np.flatnonzero(sample_ids[candidate] != id_map.ravel())
+    rest_ids = id_map.ravel()[rest]
+    flat_out[rest] = region_values(rest_ids, sample_ids, sample_albedo, "first", 1.0)
     width = id_map.shape[1]
-    for region, lo, hi in zip(regions.tolist(), starts, ends):
-        members = order[lo:hi]
-        albedo = sample_albedo[members]
-        if np.ptp(albedo, axis=0).max() <= ALBEDO_EPS:
+    for k in np.flatnonzero(varies):
+        pixels = rest[rest_ids == regions[k]]
+        if len(pixels) == 0:
             continue
-        pixels = np.flatnonzero(id_map.ravel() == region)
-        if nearest is not None:
-            candidate = nearest.ravel()[pixels]
-            same = sample_ids[candidate] == region
-            out.reshape(-1, out.shape[-1])[pixels[same]] = sample_albedo[candidate[same]]
-            pixels = pixels[~same]
-            if len(pixels) == 0:
-                continue
+        members = order[starts[k]:starts[k + 1] if k + 1 < len(starts) else len(order)]
         tree = cKDTree(sample_xy[members])
         closest = tree.query(np.stack([pixels % width, pixels // width], axis=1), workers=-1)[1]
-        out.reshape(-1, out.shape[-1])[pixels] = albedo[closest]
+        flat_out[pixels] = sample_albedo[members[closest]]
     return out
 
 
