@@ -142,14 +142,14 @@ def _refined_cholesky(distances, poly, values):
             out[:, j] = blas.strsv(factor, half, lower=1, trans=1)[q:]
         return -out
 
-    # A x column by column: gemv, several times faster than gemm for a few columns,
-    # and scipy's BLAS, whose threads are the ones still spinning after spotrf
-    # (numpy's own BLAS would start a second pool competing for the same cores)
+    # A x column by column: symv (half the matrix read; several times faster than
+    # gemm for a few columns), from scipy's BLAS, whose threads are the ones still
+    # spinning after spotrf (numpy's own would start a second pool on the same cores)
     distances_f = distances.T  # Fortran view of the symmetric matrix: no copy
 
     def product(x):
-        return np.stack([blas.dgemv(1.0, distances_f, x[:, j]) for j in range(x.shape[1])],
-                        axis=1)
+        return np.stack([blas.dsymv(1.0, distances_f, x[:, j], lower=1)
+                         for j in range(x.shape[1])], axis=1)
 
     a_q1 = product(_reflect(vectors, np.eye(n, q), transpose=False))  # A Q1, float64
     if m == 0:
