@@ -54,3 +54,40 @@ def test_small_systems_use_lu_and_agree():
     ours = rbf_solve.solve_linear_rbf(*system)
     ref = lu_reference(*system)
     assert np.allclose(ours[0], ref[0], rtol=0, atol=1e-12 * np.abs(ref[0]).max())
+
+
+@pytest.mark.parametrize("layout", ["clusters", "near_line", "wide_and_dense"])
+@pytest.mark.parametrize("degree", [-1, 1])
+def test_ill_conditioned_layouts_still_match_lu(layout, degree):
+    """Badly spread centres: the refinement either converges or hands over to LU."""
+    r = np.random.default_rng(11)
+    if layout == "clusters":  # two tight clusters far apart
+        xy = np.vstack([r.normal(0, 1e-3, (150, 2)), r.normal(0, 1e-3, (150, 2)) + 1.0])
+    elif layout == "near_line":  # almost collinear
+        t = np.linspace(-1, 1, 300)
+        xy = np.stack([t, 1e-6 * r.standard_normal(300)], axis=1)
+    else:  # a few far points around a dense patch of pixels
+        patch = np.stack(np.meshgrid(np.arange(16), np.arange(16)), -1).reshape(-1, 2) * 1e-3
+        xy = np.vstack([patch, r.uniform(-1, 1, (40, 2))])
+    n = len(xy)
+    poly = np.zeros((n, 0)) if degree < 0 else np.hstack([np.ones((n, 1)), xy[:, :1]])
+    values = np.stack([np.cos(3 * xy[:, 0]), xy[:, 1], np.ones(n)], axis=1)
+    system = (cdist(xy, xy), poly, values)
+    weights, coeffs = rbf_solve.solve_linear_rbf(*system)
+    distances = system[0]
+    residual = distances @ weights + poly @ coeffs - values
+    ref = lu_reference(*system)
+    lu_residual = distances @ ref[0] + poly @ ref[1] - values
+    # as good an interpolant as float64 LU gives, at the centres
+    assert np.abs(residual).max() <= max(1e-9, 10 * np.abs(lu_residual).max())
+    assert np.allclose(poly.T @ weights, 0.0, atol=1e-8 * np.abs(weights).max())
+
+
+def test_a_refinement_that_stalls_above_the_tolerance_hands_over_to_lu(monkeypatch):
+    system = pixel_system(300, -1)
+    monkeypatch.setattr(rbf_solve, "TOLERANCE", 0.0)  # unreachable: the residual stalls
+    monkeypatch.setattr(rbf_solve, "ACCEPTABLE", 0.0)
+    assert rbf_solve._refined_cholesky(*system) is None
+    ours = rbf_solve.solve_linear_rbf(*system)
+    ref = lu_reference(*system)
+    assert np.array_equal(ours[0], ref[0])  # the LU answer itself
