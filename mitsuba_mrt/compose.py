@@ -96,7 +96,8 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
     sample_ids = np.asarray(sample_ids)
     regions, first, inverse = np.unique(sample_ids, return_index=True, return_inverse=True)
     order = np.argsort(inverse, kind="stable")
-    starts = np.searchsorted(inverse[order], np.arange(len(regions)))
+    bounds = np.searchsorted(inverse[order], np.arange(len(regions) + 1))  # region k: bounds[k:k+2]
+    starts = bounds[:-1]
     spread = (np.maximum.reduceat(sample_albedo[order], starts)
               - np.minimum.reduceat(sample_albedo[order], starts)).max(axis=1)
     varies = spread > ALBEDO_EPS
@@ -118,7 +119,7 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
         pixels = rest[rest_ids == regions[k]]
         if len(pixels) == 0:
             continue
-        members = order[starts[k]:starts[k + 1] if k + 1 < len(starts) else len(order)]
+        members = order[bounds[k]:bounds[k + 1]]
         tree = cKDTree(sample_xy[members])
         closest = tree.query(np.stack([pixels % width, pixels // width], axis=1), workers=-1)[1]
         flat_out[pixels] = sample_albedo[members[closest]]
