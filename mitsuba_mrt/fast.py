@@ -136,9 +136,11 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     flattening.  Pixels whose block has no sample of their id take the
     value of their nearest traced pixel.
 
-    With ``use_jit`` (default: when Dr.Jit's LLVM backend is usable) the
-    same fit runs per pixel in one kernel (:mod:`mitsuba_mrt.fast_jit`);
-    otherwise once per (cell, id) group in numpy.
+    The pixels are grouped by (cell, id) first, so each quadric is fitted
+    once (a cell holds about ``1 / sample_fraction`` pixels) and evaluated at
+    its pixels.  With ``use_jit`` (default: when Dr.Jit's LLVM backend is
+    usable) the fits run in one Dr.Jit kernel (:mod:`mitsuba_mrt.fast_jit`),
+    otherwise as batched numpy solves; the tests hold the two together.
     """
     nr, nc = grid_ids.shape
     rows, cols = pattern.rows, pattern.cols
@@ -146,24 +148,117 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     cy, _ = cell_coordinates(rows, pattern.height)
     cx, _ = cell_coordinates(cols, pattern.width)
     cell_y, cell_x = cy[py], cx[px]
+    slot = _matching_slot(grid_ids, cell_y, cell_x, own)
+    # a (cell, slot) pair names a (cell, id) group; the slot search is canonical
+    # (corners first, then the rest in a fixed order), so each group has one name
+    groups, member = group_keys((cell_y * nc + cell_x) * 17 + (slot + 1), nr * nc * 17)
+    group_cell, group_slot = np.divmod(groups, 17)
+    gy0, gx0 = np.divmod(group_cell, nc)
+    found = group_slot > 0
+    gid = grid_ids[np.clip(gy0 + (group_slot - 1) // 4 - 1, 0, nr - 1),
+                   np.clip(gx0 + (group_slot - 1) % 4 - 1, 0, nc - 1)]
+    centre_y = 0.5 * (rows[gy0] + rows[np.minimum(gy0 + 1, nr - 1)])
+    centre_x = 0.5 * (cols[gx0] + cols[np.minimum(gx0 + 1, nc - 1)])
     if use_jit is None:
         use_jit = fast_jit.available()
     if use_jit:
-        return fast_jit.local_poly_fit_jit(
-            rows, cols, grid_ids, grid_values, py, px, own, cell_y, cell_x,
-            0.5 * (rows[cell_y] + rows[np.minimum(cell_y + 1, nr - 1)]),
-            0.5 * (cols[cell_x] + cols[np.minimum(cell_x + 1, nc - 1)]), spacing, _RIDGE,
-            grid_values[pattern.nearest_rows[py], pattern.nearest_cols[px]])
-    id_values, id_rank = np.unique(own, return_inverse=True)
-    keys = (cell_y * nc + cell_x) * len(id_values) + id_rank.ravel()
-    groups, member = np.unique(keys, return_inverse=True)
-    member = member.ravel()
-    cell_flat, rank = np.divmod(groups, len(id_values))
-    gy0, gx0 = np.divmod(cell_flat, nc)
-    gid = id_values[rank]
-    centre_y = 0.5 * (rows[gy0] + rows[np.minimum(gy0 + 1, nr - 1)])
-    centre_x = 0.5 * (cols[gx0] + cols[np.minimum(gx0 + 1, nc - 1)])
-    g = len(groups)
+        values = fast_jit.quadric_coefficients_jit(
+            rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x, spacing,
+            _RIDGE, at=(member, py, px))
+    else:
+        coeffs = quadric_coefficients(rows, cols, grid_ids, grid_values, gy0, gx0, gid,
+                                      centre_y, centre_x, spacing, _RIDGE)
+        ox = (px - centre_x[member]) / spacing
+        oy = (py - centre_y[member]) / spacing
+        values = coeffs[member, 0]
+        for b, term in enumerate((ox, oy, ox * ox, ox * oy, oy * oy), start=1):
+            values += term[:, None] * coeffs[member, b]
+    lost = ~found[member]
+    if lost.any():
+        values[lost] = grid_values[pattern.nearest_rows[py[lost]], pattern.nearest_cols[px[lost]]]
+    return values
+
+
+def group_keys(keys: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(keys, return_inverse=True)`` for integer keys in [0, size).
+
+    With a table of ``size`` flags when that is not much larger than the
+    keys (no sort), else with ``np.unique``.
+
+    Examples
+    --------
+    >>> groups, member = group_keys(np.array([7, 2, 7, 5]), 10)
+    >>> groups.tolist(), member.tolist()
+    ([2, 5, 7], [2, 0, 2, 1])
+    """
+    keys = np.asarray(keys)
+    if size > 16 * len(keys) + (1 << 20):
+        groups, member = np.unique(keys, return_inverse=True)
+        return groups, member.ravel()
+    used = np.zeros(size, dtype=bool)
+    used[keys] = True
+    groups = np.flatnonzero(used)
+    index = np.empty(size, dtype=np.intp)
+    index[groups] = np.arange(len(groups))
+    return groups, index[keys]
+
+
+#: Order in which the 4 x 4 block (row-major slots 0..15) is searched for a
+#: pixel's id: the cell's four corners first (slots 5, 6, 9, 10), as the
+#: pixel's id is nearly always one of theirs.
+_SLOT_ORDER = (5, 6, 9, 10, 0, 1, 2, 3, 4, 7, 8, 11, 12, 13, 14, 15)
+
+
+def _matching_slot(grid_ids: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray,
+                   own: np.ndarray) -> np.ndarray:
+    """First slot (in ``_SLOT_ORDER``) of each cell's 4 x 4 block whose sample
+    carries ``own``; -1 where none does."""
+    nr, nc = grid_ids.shape
+    slot = np.full(len(own), -1, dtype=np.int64)
+    todo = np.arange(len(own))
+    for s in _SLOT_ORDER:
+        if len(todo) == 0:
+            break
+        gy = cell_y[todo] + (s // 4 - 1)
+        gx = cell_x[todo] + (s % 4 - 1)
+        inside = (gy >= 0) & (gy < nr) & (gx >= 0) & (gx < nc)
+        hit = inside & (grid_ids[np.clip(gy, 0, nr - 1), np.clip(gx, 0, nc - 1)] == own[todo])
+        slot[todo[hit]] = s
+        todo = todo[~hit]
+    return slot
+
+
+def quadric_coefficients(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
+                         grid_values: np.ndarray, gy0: np.ndarray, gx0: np.ndarray,
+                         gid: np.ndarray, centre_y: np.ndarray, centre_x: np.ndarray,
+                         spacing: float, ridge: np.ndarray) -> np.ndarray:
+    """Weighted quadric of each (cell, id) group, as batched numpy solves.
+
+    Parameters
+    ----------
+    rows, cols : ndarray of int
+        Traced grid lines (``pattern.rows``, ``pattern.cols``).
+    grid_ids : ndarray of int64, shape (nr, nc)
+    grid_values : ndarray, shape (nr, nc, C)
+    gy0, gx0 : ndarray of int, shape (g,)
+        Grid cell of each group (its block is cell - 1 .. cell + 2).
+    gid : ndarray of int64, shape (g,)
+        The group's id: only the block's samples with it count.
+    centre_y, centre_x : ndarray of float, shape (g,)
+        Centre of the group's cell, the origin of the quadric.
+    spacing : float
+        Grid spacing in pixels, the unit of the offsets.
+    ridge : ndarray, shape (6,)
+        Ridge per basis term, relative to the total weight.
+
+    Returns
+    -------
+    ndarray of float64, shape (g, 6, C)
+        Coefficients of 1, x, y, xx, xy, yy (offsets in grid spacings from
+        the centre); zero for a group without any sample of its id.
+    """
+    nr, nc = grid_ids.shape
+    g = len(gy0)
     offsets = np.arange(-1, 3)
     gy = (gy0[:, None] + offsets[None, :])[:, :, None]          # (g, 4, 1)
     gx = (gx0[:, None] + offsets[None, :])[:, None, :]          # (g, 1, 4)
@@ -179,19 +274,11 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     normal = weighted @ basis                                     # (g, 6, 6)
     rhs = weighted @ grid_values[gy, gx].reshape(g, 16, -1)       # (g, 6, C)
     total = normal[:, 0, 0].copy()  # a copy: the ridge below changes normal
-    normal += (_RIDGE[None, :] * (total[:, None] + 1e-300))[:, :, None] * np.eye(6)[None]
+    normal += (ridge[None, :] * (total[:, None] + 1e-300))[:, :, None] * np.eye(6)[None]
     empty = total <= 0.0
     normal[empty] = np.eye(6)
-    coeffs = np.linalg.solve(normal, rhs)  # (g, 6, C)
-    ox = (px - centre_x[member]) / spacing
-    oy = (py - centre_y[member]) / spacing
-    basis = np.stack([np.ones(len(px)), ox, oy, ox * ox, ox * oy, oy * oy], axis=1)
-    values = np.einsum("mk,mkc->mc", basis, coeffs[member])
-    lost = empty[member]
-    if lost.any():
-        nearest = grid_values[pattern.nearest_rows[py[lost]], pattern.nearest_cols[px[lost]]]
-        values[lost] = nearest
-    return values
+    rhs[empty] = 0.0
+    return np.linalg.solve(normal, rhs)
 
 
 def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,

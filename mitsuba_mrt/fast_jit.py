@@ -1,13 +1,13 @@
 """The fast mode's near-edge fits as one Dr.Jit LLVM kernel.
 
-:func:`mitsuba_mrt.fast.local_poly_fit` fits a weighted quadric per (grid
-cell, id) in numpy; most of its time goes to small batched matrix products
-and temporaries.  This module computes the same fit per pixel in a single
-vectorised kernel on Dr.Jit's LLVM backend (all cores, no temporaries):
-the 4 x 4 stencil's moments, the ridge, a 6 x 6 Cholesky solve and the
-evaluation at the pixel.  It is used only where Dr.Jit's LLVM backend is
-safe to start (:func:`mitsuba_mrt.variants.llvm_usable`); elsewhere the
-numpy fit runs, and the tests hold the two together.
+:func:`mitsuba_mrt.fast.quadric_coefficients` fits a weighted quadric per
+(grid cell, id) group as batched numpy solves; most of its time goes to small
+matrix products and temporaries.  This module computes the same fits in a
+single vectorised kernel on Dr.Jit's LLVM backend (all cores, no
+temporaries): the 4 x 4 block's moments, the ridge and a 6 x 6 Cholesky
+solve per group.  It is used only where Dr.Jit's LLVM backend is safe to
+start (:func:`mitsuba_mrt.variants.llvm_usable`); elsewhere the numpy fit
+runs, and the tests hold the two together.
 """
 
 from __future__ import annotations
@@ -44,40 +44,22 @@ def available() -> bool:
     return llvm_usable()
 
 
-def local_poly_fit_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
-                       grid_values: np.ndarray, py: np.ndarray, px: np.ndarray,
-                       own: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray,
-                       centre_y: np.ndarray, centre_x: np.ndarray, spacing: float,
-                       ridge: np.ndarray, nearest: np.ndarray) -> np.ndarray:
-    """Per-pixel weighted quadric through same-id samples of the 4 x 4 block.
+def quadric_coefficients_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
+                             grid_values: np.ndarray, gy0: np.ndarray, gx0: np.ndarray,
+                             gid: np.ndarray, centre_y: np.ndarray, centre_x: np.ndarray,
+                             spacing: float, ridge: np.ndarray,
+                             at: tuple | None = None) -> np.ndarray:
+    """Weighted quadric of each (cell, id) group, in one kernel.
 
-    Parameters
-    ----------
-    rows, cols : ndarray of int
-        Traced grid lines (``pattern.rows``, ``pattern.cols``).
-    grid_ids : ndarray of int64, shape (nr, nc)
-    grid_values : ndarray, shape (nr, nc, C)
-    py, px : ndarray of int, shape (m,)
-        The pixels to fit.
-    own : ndarray of int64, shape (m,)
-        Each pixel's id.
-    cell_y, cell_x : ndarray of int, shape (m,)
-        Grid cell of each pixel (its block is cell - 1 .. cell + 2).
-    centre_y, centre_x : ndarray of float, shape (m,)
-        Centre of each pixel's cell, the origin of the quadric.
-    spacing : float
-        Grid spacing in pixels, the unit of the offsets.
-    ridge : ndarray, shape (6,)
-        Ridge per basis term, relative to the total weight.
-    nearest : ndarray, shape (m, C)
-        Value taken where no sample of the block carries the pixel's id.
-
-    Returns
-    -------
-    ndarray of float32, shape (m, C)
+    Same parameters and result as :func:`mitsuba_mrt.fast.quadric_coefficients`:
+    coefficients (g, 6, C) of 1, x, y, xx, xy, yy, zero for a group without
+    any sample of its id.  With ``at = (member, py, px)`` (pixel ``i`` of
+    group ``member[i]``), the quadrics' values (m, C) float32 at those
+    pixels instead, from a second kernel that reads the coefficients where
+    the first left them.
     """
     import drjit as dr
-    from drjit.llvm import Float64, Int32, UInt64
+    from drjit.llvm import Float32, Float64, Int32, UInt64
 
     nr, nc = grid_ids.shape
     channels = grid_values.shape[2]
@@ -85,8 +67,8 @@ def local_poly_fit_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
     values = _aligned(Float64, grid_values, np.float64)
     row_pos = _aligned(Float64, rows, np.float64)
     col_pos = _aligned(Float64, cols, np.float64)
-    own_id = _aligned(UInt64, own, np.uint64)
-    gy0, gx0 = _aligned(Int32, cell_y, np.int32), _aligned(Int32, cell_x, np.int32)
+    own_id = _aligned(UInt64, gid, np.uint64)
+    cell_y, cell_x = _aligned(Int32, gy0, np.int32), _aligned(Int32, gx0, np.int32)
     scale = dr.opaque(Float64, 1.0 / spacing)
     last_row, last_col = dr.opaque(Int32, nr - 1), dr.opaque(Int32, nc - 1)
     width, depth = dr.opaque(Int32, nc), dr.opaque(Int32, channels)
@@ -95,18 +77,20 @@ def local_poly_fit_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
     # moments[(i, j)] = sum_k w_k ox^i oy^j for i + j <= 4; rhs[b][c] = sum_k w_k basis_b v_kc
     moments = {(i, j): Float64(0.0) for i in range(5) for j in range(5 - i)}
     rhs = [[Float64(0.0) for _ in range(channels)] for _ in _POWERS]
+    oxs, inside_x = [], []
+    for dx in range(-1, 3):
+        gx = cell_x + dx
+        inside_x.append((gx >= 0) & (gx <= last_col))
+        oxs.append((dr.gather(Float64, col_pos, dr.clip(gx, 0, last_col)) - cx) * scale)
     for dy in range(-1, 3):
-        gy = gy0 + dy
+        gy = cell_y + dy
         inside_y = (gy >= 0) & (gy <= last_row)
         gy = dr.clip(gy, 0, last_row)
         oy = (dr.gather(Float64, row_pos, gy) - cy) * scale
         for dx in range(-1, 3):
-            gx = gx0 + dx
-            inside = inside_y & (gx >= 0) & (gx <= last_col)
-            gx = dr.clip(gx, 0, last_col)
-            ox = (dr.gather(Float64, col_pos, gx) - cx) * scale
-            index = gy * width + gx
-            use = inside & (dr.gather(UInt64, ids, index) == own_id)
+            ox = oxs[dx + 1]
+            index = gy * width + dr.clip(cell_x + dx, 0, last_col)
+            use = inside_y & inside_x[dx + 1] & (dr.gather(UInt64, ids, index) == own_id)
             w = dr.select(use, dr.exp(-0.5 * (ox * ox + oy * oy)), 0.0)
             xs = [w, w * ox, w * ox * ox, w * ox * ox * ox, w * ox * ox * ox * ox]
             oyp = [Float64(1.0), oy, oy * oy, oy * oy * oy, oy * oy * oy * oy]
@@ -132,10 +116,6 @@ def local_poly_fit_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
             for k in range(b):
                 s = s - lower[a][k] * lower[b][k]
             lower[a][b] = dr.sqrt(dr.maximum(s, 1e-300)) if a == b else s / lower[b][b]
-    ox = (_aligned(Float64, px, np.float64) - cx) * scale
-    oy = (_aligned(Float64, py, np.float64) - cy) * scale
-    at_pixel = [dr.power(ox, i) * dr.power(oy, j) if i + j else Float64(1.0) for i, j in _POWERS]
-    fallback = [_aligned(Float64, nearest[:, c], np.float64) for c in range(channels)]
     out = []
     for c in range(channels):
         z = []
@@ -150,7 +130,22 @@ def local_poly_fit_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
             for k in range(a + 1, 6):
                 s = s - lower[k][a] * coeff[k]
             coeff[a] = s / lower[a][a]
-        value = sum(coeff[b] * at_pixel[b] for b in range(1, 6)) + coeff[0]
-        out.append(dr.select(empty, fallback[c], value))
+        out.extend(coeff)
     dr.eval(*out)
-    return np.stack([np.asarray(v, dtype=np.float32) for v in out], axis=1)
+    if at is None:  # out is channel-major: (C, 6) arrays of length g
+        stacked = np.stack([np.asarray(v) for v in out], axis=1).reshape(len(gy0), channels, 6)
+        return stacked.transpose(0, 2, 1)
+    member, py, px = at
+    group = _aligned(Int32, member, np.int32)
+    ox = (_aligned(Float64, px, np.float64) - dr.gather(Float64, cx, group)) * scale
+    oy = (_aligned(Float64, py, np.float64) - dr.gather(Float64, cy, group)) * scale
+    terms = [ox, oy, ox * ox, ox * oy, oy * oy]
+    result = []
+    for c in range(channels):
+        coeff = out[6 * c:6 * c + 6]
+        value = dr.gather(Float64, coeff[0], group)
+        for b, term in enumerate(terms, start=1):
+            value = dr.fma(term, dr.gather(Float64, coeff[b], group), value)
+        result.append(Float32(value))
+    dr.eval(*result)
+    return np.stack([np.asarray(v) for v in result], axis=1)
