@@ -396,10 +396,17 @@ def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counte
 
 
 def _albedo_constant_per_id(sample_ids: np.ndarray, albedo: np.ndarray) -> bool:
+    """True when every id's samples share one albedo: a spread of at most
+    ``ALBEDO_EPS`` per channel, the criterion of :func:`~mitsuba_mrt.compose.region_albedo`."""
     order = np.argsort(sample_ids, kind="stable")
-    ids, alb = sample_ids[order], albedo[order]
-    same_id = ids[1:] == ids[:-1]
-    return bool(np.all(np.abs(alb[1:] - alb[:-1])[same_id] <= ALBEDO_EPS))
+    ids = sample_ids[order]
+    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
+    for channel in np.asarray(albedo).T:  # channel by channel: often column-major
+        values = channel[order]
+        spread = np.maximum.reduceat(values, starts) - np.minimum.reduceat(values, starts)
+        if spread.max() > ALBEDO_EPS:
+            return False
+    return True
 
 
 register_mode("fast", fast_reconstruct)

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
-from mitsuba_mrt import fast_jit
+from mitsuba_mrt import fast, fast_jit
+from mitsuba_mrt.compose import ALBEDO_EPS
 from mitsuba_mrt.edges import quadtree_fill, region_boxes, smooth_ids
 from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, separable_cubic
 
@@ -114,3 +115,15 @@ def test_jit_and_numpy_near_edge_fits_agree(channels):
     ref = local_poly_fit(p, grid_ids, values, py, px, own, use_jit=False)
     assert jit.shape == ref.shape == (len(py), channels)
     assert np.allclose(jit, ref, rtol=1e-5, atol=1e-5)
+
+
+def test_albedo_constancy_is_the_spread_per_id_not_neighbour_steps():
+    # a slow ramp: each step is below ALBEDO_EPS, the whole spread is not
+    ids = np.repeat([3, 5], 50)
+    albedo = np.full((100, 3), 0.5)
+    assert fast._albedo_constant_per_id(ids, albedo)
+    albedo[:50, 1] += np.arange(50) * 0.5 * ALBEDO_EPS
+    assert not fast._albedo_constant_per_id(ids, albedo)
+    albedo[:50, 1] = 0.5 + 0.5 * ALBEDO_EPS  # within tolerance
+    albedo[50:, 2] = 0.9  # another id, another (constant) albedo
+    assert fast._albedo_constant_per_id(ids, np.asfortranarray(albedo))
