@@ -71,6 +71,16 @@ def region_values(id_map: np.ndarray, sample_ids: np.ndarray, sample_values: np.
     return np.where(found, table[pos], np.asarray(fill, dtype=table.dtype))
 
 
+#: Queries of fewer points than this run on one thread: scipy starts its
+#: query threads from Python (about a millisecond), more than a small query costs.
+PARALLEL_QUERY_POINTS = 1 << 15
+
+
+def query_workers(points: int) -> int:
+    """``workers`` for a k-d tree query of ``points`` points (-1: all cores)."""
+    return -1 if points >= PARALLEL_QUERY_POINTS else 1
+
+
 def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndarray,
                   sample_albedo: np.ndarray, nearest: np.ndarray | None = None) -> np.ndarray:
     """Per-pixel albedo estimated from the samples of the pixel's own id.
@@ -121,7 +131,8 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
             continue
         members = order[bounds[k]:bounds[k + 1]]
         tree = cKDTree(sample_xy[members])
-        closest = tree.query(np.stack([pixels % width, pixels // width], axis=1), workers=-1)[1]
+        closest = tree.query(np.stack([pixels % width, pixels // width], axis=1),
+                             workers=query_workers(len(pixels)))[1]
         flat_out[pixels] = sample_albedo[members[closest]]
     return out
 

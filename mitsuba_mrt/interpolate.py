@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from .compose import query_workers
 from .errors import MRTError
 from .rbf import LinearRBF
 
@@ -154,7 +155,7 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
             if nearest_tree is None:
                 nearest_tree = cKDTree(sample_xy)
             xy = np.stack([pixels % width, pixels // width], axis=1)
-            out[pixels] = sample_values[nearest_tree.query(xy, workers=-1)[1]]
+            out[pixels] = sample_values[nearest_tree.query(xy, workers=query_workers(len(xy)))[1]]
             result.counts["no_samples"] += 1
             continue
         lo, hi = sample_bounds[region]
