@@ -16,6 +16,16 @@ The reconstruction stages are plain numpy modules: ``sampling``, ``ids``,
 from __future__ import annotations
 
 import importlib
+import os
+
+# OpenBLAS worker threads spin for about 2**28 cycles (~0.1 s) after each BLAS
+# call before they sleep; between the paper mode's factorisations they held
+# one of the cores that cdist's threads, the FFTs and Dr.Jit wanted, and the
+# mode took ~10 % longer.  2**16 cycles (~20 us) still bridges the pauses
+# inside one factorisation.  Read when an OpenBLAS is loaded, so this only
+# reaches the BLAS libraries imported after mitsuba_mrt (scipy.linalg's, as a
+# rule); a value the user set is kept.
+os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "16")
 
 from .errors import MRTError
 from . import baselines, fast, idpass, refine  # noqa: F401  (register the modes beyond paper)

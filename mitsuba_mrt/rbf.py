@@ -9,6 +9,10 @@ knows nothing of images or ids; :mod:`mitsuba_mrt.interpolate` calls it.
 
 from __future__ import annotations
 
+import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import scipy.linalg
 from scipy.spatial.distance import cdist
@@ -19,6 +23,44 @@ from .rbf_solve import solve_linear_rbf
 
 #: Elements of the distance matrix evaluated at once (about 32 MB of float64).
 EVAL_BLOCK_ELEMENTS = 1 << 22
+
+
+#: Distance matrices with at least this many rows are computed in row blocks,
+#: one per core, on threads (scipy's ``cdist`` releases the GIL).
+PARALLEL_ROWS = 512
+
+
+@functools.cache
+def _row_pool() -> tuple[ThreadPoolExecutor | None, int]:
+    """Threads for :func:`pairwise_distances` and their number (None: one core)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    workers = min(cores, 8)
+    return (ThreadPoolExecutor(workers, thread_name_prefix="mrt-cdist") if workers > 1
+            else None), workers
+
+
+def pairwise_distances(points: np.ndarray) -> np.ndarray:
+    """``cdist(points, points)``, in row blocks on all cores when large.
+
+    Examples
+    --------
+    >>> pairwise_distances(np.array([[0.0, 0.0], [3.0, 4.0]]))
+    array([[0., 5.],
+           [5., 0.]])
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n = len(points)
+    pool, workers = _row_pool()
+    if pool is None or n < PARALLEL_ROWS:
+        return cdist(points, points)
+    out = np.empty((n, n))
+    cuts = np.linspace(0, n, workers + 1).astype(int)
+    list(pool.map(lambda k: cdist(points[cuts[k]:cuts[k + 1]], points,
+                                  out=out[cuts[k]:cuts[k + 1]]), range(workers)))
+    return out
 
 
 class LinearRBF:
@@ -71,7 +113,7 @@ class LinearRBF:
         self._basis = self._polynomial_basis(self._centres, degree)
         try:
             self._weights, self._poly_coeffs = solve_linear_rbf(
-                cdist(self._centres, self._centres), self._poly(self._centres), values)
+                pairwise_distances(self._centres), self._poly(self._centres), values)
         except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
             raise MRTError("RBF system is singular: centres must be distinct") from None
 
