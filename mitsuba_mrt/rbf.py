@@ -9,10 +9,6 @@ knows nothing of images or ids; :mod:`mitsuba_mrt.interpolate` calls it.
 
 from __future__ import annotations
 
-import functools
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 import scipy.linalg
 from scipy.spatial.distance import cdist
@@ -20,6 +16,7 @@ from scipy.spatial.distance import cdist
 from . import rbf_fast
 from .errors import MRTError
 from .rbf_solve import solve_linear_rbf
+from .threads import for_row_blocks
 
 #: Elements of the distance matrix evaluated at once (about 32 MB of float64).
 EVAL_BLOCK_ELEMENTS = 1 << 22
@@ -28,18 +25,6 @@ EVAL_BLOCK_ELEMENTS = 1 << 22
 #: Distance matrices with at least this many rows are computed in row blocks,
 #: one per core, on threads (scipy's ``cdist`` releases the GIL).
 PARALLEL_ROWS = 512
-
-
-@functools.cache
-def _row_pool() -> tuple[ThreadPoolExecutor | None, int]:
-    """Threads for :func:`pairwise_distances` and their number (None: one core)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    workers = min(cores, 8)
-    return (ThreadPoolExecutor(workers, thread_name_prefix="mrt-cdist") if workers > 1
-            else None), workers
 
 
 def pairwise_distances(points: np.ndarray) -> np.ndarray:
@@ -52,14 +37,9 @@ def pairwise_distances(points: np.ndarray) -> np.ndarray:
            [5., 0.]])
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
-    n = len(points)
-    pool, workers = _row_pool()
-    if pool is None or n < PARALLEL_ROWS:
-        return cdist(points, points)
-    out = np.empty((n, n))
-    cuts = np.linspace(0, n, workers + 1).astype(int)
-    list(pool.map(lambda k: cdist(points[cuts[k]:cuts[k + 1]], points,
-                                  out=out[cuts[k]:cuts[k + 1]]), range(workers)))
+    out = np.empty((len(points), len(points)))
+    for_row_blocks(lambda a, b: cdist(points[a:b], points, out=out[a:b]), len(points),
+                   PARALLEL_ROWS)
     return out
 
 

@@ -1,0 +1,49 @@
+"""Row blocks on all cores, for numpy and scipy calls that release the GIL.
+
+``cdist``, numpy's ufuncs and scipy's filters drop the GIL while they work,
+so plain threads run them side by side.  One pool serves the package.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+
+@functools.cache
+def _pool() -> tuple[ThreadPoolExecutor | None, int]:
+    """The package's thread pool and its size (None: a single core)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        cores = os.cpu_count() or 1
+    workers = min(cores, 8)
+    return (ThreadPoolExecutor(workers, thread_name_prefix="mitsuba-mrt") if workers > 1
+            else None), workers
+
+
+def for_row_blocks(function, rows: int, min_rows: int = 512) -> None:
+    """Call ``function(start, stop)`` on contiguous blocks covering ``range(rows)``.
+
+    One block per core, on threads, when ``rows >= min_rows`` and there is
+    more than one core; else one call on the calling thread.  ``function``
+    must only write rows ``start:stop`` of its output.
+
+    Examples
+    --------
+    >>> out = np.zeros(1000)
+    >>> def fill(a, b): out[a:b] = np.arange(a, b)
+    >>> for_row_blocks(fill, 1000, min_rows=10)
+    >>> bool(np.array_equal(out, np.arange(1000)))
+    True
+    """
+    pool, workers = _pool()
+    if pool is None or rows < min_rows:
+        function(0, rows)
+        return
+    cuts = np.linspace(0, rows, workers + 1).astype(int).tolist()
+    for future in [pool.submit(function, a, b) for a, b in zip(cuts[:-1], cuts[1:])]:
+        future.result()
