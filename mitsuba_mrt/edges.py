@@ -17,6 +17,7 @@ from scipy import ndimage
 
 from .errors import MRTError
 from .sampling import SamplePattern
+from .threads import for_row_blocks
 
 
 def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
@@ -279,9 +280,36 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
         cc = np.flatnonzero(mask.any(axis=0))
         r0, r1 = max(b0 + rr[0] - reach, 0), min(b0 + rr[-1] + reach + 1, height)
         c0, c1 = max(d0 + cc[0] - reach, 0), min(d0 + cc[-1] + reach + 1, width)
-        mask = out[r0:r1, c0:c1] == value
-        blurred = ndimage.gaussian_filter(mask.astype(np.float32), filter_sigma)
+        blurred = _blurred_mask(out, value, (r0, r1, c0, c1), filter_sigma, reach)
         peak = blurred.max()
         if peak > 0.0:
             out[r0:r1, c0:c1][blurred / peak > filter_cutoff] = value
+    return out
+
+
+#: Rectangles of at least this many pixels are blurred in row blocks on all
+#: cores (scipy's filters release the GIL); smaller ones are not worth the threads.
+PARALLEL_AREA = 1 << 18
+
+
+def _blurred_mask(ids: np.ndarray, value: int, rect: tuple, sigma: float,
+                  reach: int) -> np.ndarray:
+    """Gaussian blur (float32) of ``ids == value`` over ``rect`` = (r0, r1, c0, c1).
+
+    A large rectangle is blurred in row blocks, each with ``reach`` rows of
+    margin: the filter is separable and truncated at ``reach``, so every
+    block's rows come out exactly as in the blur of the whole rectangle.
+    """
+    r0, r1, c0, c1 = rect
+    out = np.empty((r1 - r0, c1 - c0), dtype=np.float32)
+
+    def blur(a, b):
+        lo, hi = max(a - reach, 0), min(b + reach, r1 - r0)
+        mask = (ids[r0 + lo:r0 + hi, c0:c1] == value).astype(np.float32)
+        out[a:b] = ndimage.gaussian_filter(mask, sigma)[a - lo:b - lo]
+
+    if out.size < PARALLEL_AREA:
+        blur(0, r1 - r0)
+    else:
+        for_row_blocks(blur, r1 - r0, min_rows=8 * reach)
     return out

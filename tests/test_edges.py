@@ -3,6 +3,7 @@ import pytest
 from scipy import ndimage
 
 from mitsuba_mrt import MRTError, SamplePattern, grid_pattern
+from mitsuba_mrt import edges
 from mitsuba_mrt.edges import quadtree_fill, smooth_ids
 
 
@@ -171,7 +172,10 @@ def naive_smooth(ids, sigma, cutoff):
 
 
 @pytest.mark.parametrize("sigma,cutoff", [(1.0, 0.05), (2.0, 0.2), (4.0, 0.15)])
-def test_smoothing_matches_whole_image_filter(sigma, cutoff):
+@pytest.mark.parametrize("row_blocks", [False, True])
+def test_smoothing_matches_whole_image_filter(sigma, cutoff, row_blocks, monkeypatch):
+    if row_blocks:  # every rectangle blurred in row blocks on threads
+        monkeypatch.setattr(edges, "PARALLEL_AREA", 1)
     rng = np.random.default_rng(1)
     ids = ndimage.zoom(rng.integers(0, 4, (6, 7)), 10, order=0)
     ids[:3, :5] = 9  # a small id at the border
