@@ -127,3 +127,35 @@ def test_albedo_constancy_is_the_spread_per_id_not_neighbour_steps():
     albedo[:50, 1] = 0.5 + 0.5 * ALBEDO_EPS  # within tolerance
     albedo[50:, 2] = 0.9  # another id, another (constant) albedo
     assert fast._albedo_constant_per_id(ids, np.asfortranarray(albedo))
+
+
+def test_grouped_fits_equal_one_fit_per_pixel():
+    # the fits are shared by the pixels of a (cell, id); fitting every pixel on
+    # its own, with its own id, must give the same values
+    p = grid_pattern(90, 70, 0.1)
+    rng = np.random.default_rng(11)
+    grid_ids = rng.integers(0, 3, p.grid_shape).astype(np.int64)
+    values = rng.normal(size=p.grid_shape + (3,))
+    py, px = np.nonzero(rng.random((70, 90)) < 0.6)
+    own = rng.integers(0, 4, len(py)).astype(np.int64)  # id 3 is in no block
+    grouped = local_poly_fit(p, grid_ids, values, py, px, own, use_jit=False)
+
+    nr, nc = p.grid_shape
+    cy, _ = fast.cell_coordinates(p.rows, p.height)
+    cx, _ = fast.cell_coordinates(p.cols, p.width)
+    gy0, gx0 = cy[py], cx[px]
+    centre_y = 0.5 * (p.rows[gy0] + p.rows[np.minimum(gy0 + 1, nr - 1)])
+    centre_x = 0.5 * (p.cols[gx0] + p.cols[np.minimum(gx0 + 1, nc - 1)])
+    spacing = max(p.height / (nr - 1), p.width / (nc - 1))
+    coeffs = fast.quadric_coefficients(p.rows, p.cols, grid_ids, values, gy0, gx0, own,
+                                       centre_y, centre_x, spacing, fast._RIDGE)
+    ox, oy = (px - centre_x) / spacing, (py - centre_y) / spacing
+    basis = np.stack([np.ones_like(ox), ox, oy, ox * ox, ox * oy, oy * oy], axis=1)
+    per_pixel = np.einsum("mk,mkc->mc", basis, coeffs)
+    block = [(gy0 + dy >= 0) & (gy0 + dy < nr) & (gx0 + dx >= 0) & (gx0 + dx < nc)
+             & (grid_ids[np.clip(gy0 + dy, 0, nr - 1), np.clip(gx0 + dx, 0, nc - 1)] == own)
+             for dy in range(-1, 3) for dx in range(-1, 3)]
+    lost = ~np.any(block, axis=0)
+    assert lost.any() and not lost.all()
+    per_pixel[lost] = values[p.nearest_rows[py[lost]], p.nearest_cols[px[lost]]]
+    assert np.allclose(grouped, per_pixel, rtol=1e-12, atol=1e-12)
