@@ -162,9 +162,9 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     if use_jit is None:
         use_jit = fast_jit.available()
     if use_jit:
-        values = fast_jit.quadric_coefficients_jit(
+        values = fast_jit.quadric_values_jit(
             rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x, spacing,
-            _RIDGE, at=(member, py, px))
+            _RIDGE, member, py, px)
     else:
         coeffs = quadric_coefficients(rows, cols, grid_ids, grid_values, gy0, gx0, gid,
                                       centre_y, centre_x, spacing, _RIDGE)

@@ -5,7 +5,7 @@
 matrix products and temporaries.  This module computes the same fits in a
 single vectorised kernel on Dr.Jit's LLVM backend (all cores, no
 temporaries): the 4 x 4 block's moments, the ridge and a 6 x 6 Cholesky
-solve per group.  It is used only where Dr.Jit's LLVM backend is safe to
+solve per group, then a second kernel evaluates the fits at the pixels.  It is used only where Dr.Jit's LLVM backend is safe to
 start (:func:`mitsuba_mrt.variants.llvm_usable`); elsewhere the numpy fit
 runs, and the tests hold the two together.
 """
@@ -44,19 +44,19 @@ def available() -> bool:
     return llvm_usable()
 
 
-def quadric_coefficients_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
-                             grid_values: np.ndarray, gy0: np.ndarray, gx0: np.ndarray,
-                             gid: np.ndarray, centre_y: np.ndarray, centre_x: np.ndarray,
-                             spacing: float, ridge: np.ndarray,
-                             at: tuple | None = None) -> np.ndarray:
-    """Weighted quadric of each (cell, id) group, in one kernel.
+def quadric_values_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
+                       grid_values: np.ndarray, gy0: np.ndarray, gx0: np.ndarray,
+                       gid: np.ndarray, centre_y: np.ndarray, centre_x: np.ndarray,
+                       spacing: float, ridge: np.ndarray, member: np.ndarray,
+                       py: np.ndarray, px: np.ndarray) -> np.ndarray:
+    """Weighted quadric of each (cell, id) group, evaluated at its pixels.
 
-    Same parameters and result as :func:`mitsuba_mrt.fast.quadric_coefficients`:
-    coefficients (g, 6, C) of 1, x, y, xx, xy, yy, zero for a group without
-    any sample of its id.  With ``at = (member, py, px)`` (pixel ``i`` of
-    group ``member[i]``), the quadrics' values (m, C) float32 at those
-    pixels instead, from a second kernel that reads the coefficients where
-    the first left them.
+    The groups' parameters are those of
+    :func:`mitsuba_mrt.fast.quadric_coefficients` (one kernel fits them all);
+    pixel ``i`` at (``py[i]``, ``px[i]``) belongs to group ``member[i]``, and a
+    second kernel evaluates its quadric there, reading the coefficients where
+    the first left them.  Returns float32 values (m, C); a group without any
+    sample of its id gives 0.
     """
     import drjit as dr
     from drjit.llvm import Float32, Float64, Int32, UInt64
@@ -131,11 +131,7 @@ def quadric_coefficients_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.nd
                 s = s - lower[k][a] * coeff[k]
             coeff[a] = s / lower[a][a]
         out.extend(coeff)
-    dr.eval(*out)
-    if at is None:  # out is channel-major: (C, 6) arrays of length g
-        stacked = np.stack([np.asarray(v) for v in out], axis=1).reshape(len(gy0), channels, 6)
-        return stacked.transpose(0, 2, 1)
-    member, py, px = at
+    dr.eval(*out)  # channel-major: coefficients of channel c are out[6c:6c + 6]
     group = _aligned(Int32, member, np.int32)
     ox = (_aligned(Float64, px, np.float64) - dr.gather(Float64, cx, group)) * scale
     oy = (_aligned(Float64, py, np.float64) - dr.gather(Float64, cy, group)) * scale
