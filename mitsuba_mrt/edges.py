@@ -267,24 +267,35 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
     if filter_sigma == 0.0:
         return out
     reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation
+    weights = gaussian_weights(filter_sigma, reach)
     height, width = out.shape
     values = sorted(boxes) if boxes is not None else np.unique(out).tolist()
     for value in values:
         if value == background:
             continue
+        # The mask on the id's box grown by the reach, which holds the blur's rectangle.
         b0, b1, d0, d1 = boxes[value] if boxes is not None else (0, height, 0, width)
-        mask = out[b0:b1, d0:d1] == value
+        g0, g1 = max(b0 - reach, 0), min(b1 + reach, height)
+        h0, h1 = max(d0 - reach, 0), min(d1 + reach, width)
+        mask = out[g0:g1, h0:h1] == value
         rr = np.flatnonzero(mask.any(axis=1))
         if len(rr) == 0:  # all its pixels were taken by an earlier id
             continue
         cc = np.flatnonzero(mask.any(axis=0))
-        r0, r1 = max(b0 + rr[0] - reach, 0), min(b0 + rr[-1] + reach + 1, height)
-        c0, c1 = max(d0 + cc[0] - reach, 0), min(d0 + cc[-1] + reach + 1, width)
-        blurred = _blurred_mask(out, value, (r0, r1, c0, c1), filter_sigma, reach)
+        r0, r1 = max(g0 + rr[0] - reach, 0), min(g0 + rr[-1] + reach + 1, height)
+        c0, c1 = max(h0 + cc[0] - reach, 0), min(h0 + cc[-1] + reach + 1, width)
+        blurred = _blurred_mask(mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0], weights)
         peak = blurred.max()
         if peak > 0.0:
-            out[r0:r1, c0:c1][blurred / peak > filter_cutoff] = value
+            np.copyto(out[r0:r1, c0:c1], value, where=blurred / peak > filter_cutoff)
     return out
+
+
+def gaussian_weights(sigma: float, reach: int) -> np.ndarray:
+    """The 1-D Gaussian taps ``scipy.ndimage.gaussian_filter`` uses (``2 reach + 1``, sum 1)."""
+    x = np.arange(-reach, reach + 1)
+    taps = np.exp(-0.5 / (sigma * sigma) * x ** 2)
+    return taps / taps.sum()
 
 
 #: Rectangles of at least this many pixels are blurred in row blocks on all
@@ -292,24 +303,32 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
 PARALLEL_AREA = 1 << 18
 
 
-def _blurred_mask(ids: np.ndarray, value: int, rect: tuple, sigma: float,
-                  reach: int) -> np.ndarray:
-    """Gaussian blur (float32) of ``ids == value`` over ``rect`` = (r0, r1, c0, c1).
+def _blurred_mask(mask: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Gaussian blur (float32) of a boolean ``mask``, as ``gaussian_filter`` does it.
 
-    A large rectangle is blurred in row blocks, each with ``reach`` rows of
-    margin: the filter is separable and truncated at ``reach``, so every
-    block's rows come out exactly as in the blur of the whole rectangle.
+    Two ``correlate1d`` passes (rows, then columns, reflecting at the edges)
+    with the taps of :func:`gaussian_weights`: bit for bit what
+    ``ndimage.gaussian_filter(mask.astype(np.float32), sigma)`` returns,
+    without its per-call set-up.  A large mask is blurred in row blocks,
+    each with ``reach`` rows of margin: the filter is separable and
+    truncated at ``reach``, so every block's rows come out exactly as in
+    the blur of the whole mask.
     """
-    r0, r1, c0, c1 = rect
-    out = np.empty((r1 - r0, c1 - c0), dtype=np.float32)
+    reach = len(weights) // 2
+    rows = mask.shape[0]
+    out = np.empty(mask.shape, dtype=np.float32)
+    source = mask.view(np.uint8)
 
     def blur(a, b):
-        lo, hi = max(a - reach, 0), min(b + reach, r1 - r0)
-        mask = (ids[r0 + lo:r0 + hi, c0:c1] == value).astype(np.float32)
-        out[a:b] = ndimage.gaussian_filter(mask, sigma)[a - lo:b - lo]
+        lo, hi = max(a - reach, 0), min(b + reach, rows)
+        if lo == a and hi == b:  # the whole mask
+            ndimage.correlate1d(source, weights, 0, out)
+        else:
+            out[a:b] = ndimage.correlate1d(source[lo:hi], weights, 0, np.float32)[a - lo:b - lo]
+        ndimage.correlate1d(out[a:b], weights, 1, out[a:b])
 
     if out.size < PARALLEL_AREA:
-        blur(0, r1 - r0)
+        blur(0, rows)
     else:
-        for_row_blocks(blur, r1 - r0, min_rows=8 * reach)
+        for_row_blocks(blur, rows, min_rows=8 * reach)
     return out

@@ -205,3 +205,17 @@ def test_id_swallowed_by_an_earlier_id_does_not_crash():
     ids[0, 0] = 3
     out = smooth_ids(ids, 1.0, 0.05)
     assert set(np.unique(out)) <= {1, 2, 3}
+
+
+@pytest.mark.parametrize("sigma", [0.6, 1.0, 2.5])
+@pytest.mark.parametrize("row_blocks", [False, True])
+def test_blur_is_gaussian_filter_bit_for_bit(sigma, row_blocks, monkeypatch):
+    # the threshold compares float32 blurs, so they must be scipy's own values
+    if row_blocks:
+        monkeypatch.setattr(edges, "PARALLEL_AREA", 1)
+    rng = np.random.default_rng(3)
+    mask = ndimage.zoom(rng.random((9, 11)) < 0.5, 7, order=0)[:, 3:]  # a strided view
+    reach = int(4.0 * sigma + 0.5)
+    blurred = edges._blurred_mask(mask, edges.gaussian_weights(sigma, reach))
+    expected = ndimage.gaussian_filter(mask.astype(np.float32), sigma)
+    assert blurred.dtype == np.float32 and np.array_equal(blurred, expected)
