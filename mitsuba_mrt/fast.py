@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from concurrent.futures import Future
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
@@ -32,6 +34,7 @@ from .compose import ALBEDO_EPS, safe_albedo
 from .edges import region_boxes, smooth_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
+from .threads import beside
 
 
 def cell_coordinates(positions: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
@@ -281,9 +284,40 @@ def quadric_coefficients(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarra
     return np.linalg.solve(normal, rhs)
 
 
+@dataclass
+class EarlyValues:
+    """What :func:`interpolate_within_ids` can compute before the final pixel ids."""
+
+    image: np.ndarray        # (height, width, C): the separable cubic
+    stencil_ids: np.ndarray  # (height, width): the id all 16 cubic samples carry, else -1
+
+
+def early_values(pattern: SamplePattern, grid_ids: np.ndarray,
+                 grid_values: np.ndarray) -> EarlyValues:
+    """The id-independent half of :func:`interpolate_within_ids`.
+
+    The separable cubic at every pixel and, per pixel, the id all 16
+    samples of its cubic stencil carry (-1 where they differ, and everywhere
+    on a grid under 4 x 4, where there is no cubic).
+    """
+    nr, nc = pattern.grid_shape
+    shape = (pattern.height, pattern.width)
+    if nr < 4 or nc < 4:
+        image = np.zeros(shape + grid_values.shape[2:], grid_values.dtype)
+        stencil_ids = np.full(shape, -1, dtype=np.int64)
+    else:
+        fy, _ = cubic_weights(pattern.rows, pattern.height)
+        fx, _ = cubic_weights(pattern.cols, pattern.width)
+        stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
+        image = separable_cubic(pattern, grid_values)
+        stencil_ids = stencil_id.take(fy, axis=0).take(fx, axis=1)  # two 1-D gathers
+    return EarlyValues(image, stencil_ids)
+
+
 def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
                            grid_values: np.ndarray, id_map: np.ndarray,
-                           constant: dict | None = None) -> tuple[np.ndarray, int]:
+                           constant: dict | None = None,
+                           early: EarlyValues | None = None) -> tuple[np.ndarray, int]:
     """Interpolate grid values at every pixel from samples of the pixel's own id.
 
     Parameters
@@ -295,6 +329,9 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     constant : dict, optional
         ``id -> value`` for ids known to be constant (e.g. a black
         background): their pixels near edges are filled, not fitted.
+    early : EarlyValues, optional
+        What :func:`early_values` returns for these grid ids and values, if
+        the caller computed it already (it is written to).
 
     Returns
     -------
@@ -302,16 +339,10 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     edge_pixels : int
         Number of pixels fitted near edges (the rest used the cubic).
     """
-    nr, nc = pattern.grid_shape
-    if nr < 4 or nc < 4:
-        out = np.zeros((pattern.height, pattern.width, grid_values.shape[2]), grid_values.dtype)
-        slow = np.ones((pattern.height, pattern.width), dtype=bool)
-    else:
-        out = separable_cubic(pattern, grid_values)
-        fy, _ = cubic_weights(pattern.rows, pattern.height)
-        fx, _ = cubic_weights(pattern.cols, pattern.width)
-        stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
-        slow = stencil_id.take(fy, axis=0).take(fx, axis=1) != id_map  # two 1-D gathers
+    if early is None:
+        early = early_values(pattern, grid_ids, grid_values)
+    out = early.image
+    slow = early.stencil_ids != id_map
     for value, fill in (constant or {}).items():
         near_edge = slow & (id_map == value)
         out[near_edge] = fill
@@ -341,6 +372,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     start = time.perf_counter()
     sample_ids = trace.ids(params.rule_for("fast"))
     grid_ids = sample_ids.reshape(pattern.grid_shape)
+    values = TracedGridValues.start(pattern, trace, sample_ids, stats)  # beside the ids
     id_map = pattern.nearest_image(grid_ids)
     stats["regions"] = int(len(np.unique(sample_ids)))
     if stats["regions"] == 1:
@@ -351,38 +383,66 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     edges_s = time.perf_counter() - start
 
     start = time.perf_counter()
-    image = interpolate_traced_grid(pattern, trace, sample_ids, id_map, stats)
+    image = values.finish(id_map, stats)
     return Reconstruction(image, id_map, pattern.mask,
                           {"edges": edges_s, "interpolate": time.perf_counter() - start}, stats)
 
 
-def interpolate_traced_grid(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
-                            id_map: np.ndarray, stats: Counter) -> np.ndarray:
-    """Radiance at every pixel from the traced grid, within each pixel's id.
+@dataclass
+class TracedGridValues:
+    """Within-id interpolation of the traced grid, in two halves.
 
+    :meth:`start` does what needs no final pixel ids (it chooses the values
+    to interpolate and starts :func:`early_values` on a worker thread), so a
+    caller can find the ids meanwhile; :meth:`finish` takes them and fits
+    the pixels near edges.
     Radiance is interpolated directly when albedo is constant within every
     id; otherwise irradiance (radiance / albedo) and albedo are, with the
     same weights, and multiplied back.  A black background is filled, and
-    traced pixels keep their traced radiance.  Skips and the number of
-    pixels fitted near edges are counted in ``stats``.
+    traced pixels keep their traced radiance.
     """
-    grid_ids = sample_ids.reshape(pattern.grid_shape)
-    grid_shape = pattern.grid_shape + (3,)
-    albedo = safe_albedo(trace.albedo)
-    constant = black_background(sample_ids, trace.radiance, stats)
-    if _albedo_constant_per_id(sample_ids, albedo):
-        stats["skipped_albedo_division"] += 1
-        values = trace.radiance.astype(np.float32).reshape(grid_shape)
-        image, edge_pixels = interpolate_within_ids(pattern, grid_ids, values, id_map, constant)
-    else:
-        both = np.concatenate([trace.radiance / albedo, albedo], axis=1)
+
+    pattern: SamplePattern
+    trace: SparseTrace
+    grid_ids: np.ndarray     # sample ids, shape pattern.grid_shape
+    grid_values: np.ndarray  # float32, grid shape + (3,) radiance or (6,) irradiance and albedo
+    constant: dict           # id -> fill value, for ids never interpolated
+    early: Future            # of early_values(pattern, grid_ids, grid_values)
+
+    @classmethod
+    def start(cls, pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
+              stats: Counter) -> "TracedGridValues":
+        """Choose the values and start :func:`early_values` on them; skips
+        are counted in ``stats``."""
+        grid_ids = sample_ids.reshape(pattern.grid_shape)
+        albedo = safe_albedo(trace.albedo)
+        constant = black_background(sample_ids, trace.radiance, stats)
+        if _albedo_constant_per_id(sample_ids, albedo):
+            stats["skipped_albedo_division"] += 1
+            values = trace.radiance.astype(np.float32)
+        else:
+            values = np.concatenate([trace.radiance / albedo, albedo], axis=1).astype(np.float32)
+        values = values.reshape(pattern.grid_shape + (values.shape[1],))
+        return cls(pattern, trace, grid_ids, values, constant,
+                   beside(early_values, pattern, grid_ids, values))
+
+    def finish(self, id_map: np.ndarray, stats: Counter) -> np.ndarray:
+        """Radiance (height, width, 3) with every pixel's values from its own id."""
         interp, edge_pixels = interpolate_within_ids(
-            pattern, grid_ids, both.astype(np.float32).reshape(pattern.grid_shape + (6,)), id_map,
-            constant)
-        image = interp[..., :3] * interp[..., 3:]
-    image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(grid_shape)
-    stats["edge_pixels"] = int(edge_pixels)
-    return image
+            self.pattern, self.grid_ids, self.grid_values, id_map, self.constant,
+            self.early.result())
+        image = interp if interp.shape[2] == 3 else interp[..., :3] * interp[..., 3:]
+        image[np.ix_(self.pattern.rows, self.pattern.cols)] = self.trace.radiance.reshape(
+            self.pattern.grid_shape + (3,))
+        stats["edge_pixels"] = int(edge_pixels)
+        return image
+
+
+def interpolate_traced_grid(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
+                            id_map: np.ndarray, stats: Counter) -> np.ndarray:
+    """Radiance at every pixel from the traced grid, within each pixel's id
+    (both halves of :class:`TracedGridValues` in one call)."""
+    return TracedGridValues.start(pattern, trace, sample_ids, stats).finish(id_map, stats)
 
 
 def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter) -> dict:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -45,5 +45,29 @@ def for_row_blocks(function, rows: int, min_rows: int = 512) -> None:
         function(0, rows)
         return
     cuts = np.linspace(0, rows, workers + 1).astype(int).tolist()
-    for future in [pool.submit(function, a, b) for a, b in zip(cuts[:-1], cuts[1:])]:
+    futures = [pool.submit(function, a, b) for a, b in zip(cuts[:-2], cuts[1:-1])]
+    function(cuts[-2], cuts[-1])  # the last block on the calling thread
+    for future in futures:
         future.result()
+
+
+def beside(function, *args) -> Future:
+    """Start ``function(*args)`` on the pool while the caller goes on.
+
+    Returns its future; on a single core the call runs at once and the
+    future is already done.  Exceptions come out of ``result()``.
+
+    Examples
+    --------
+    >>> beside(sum, [1, 2, 3]).result()
+    6
+    """
+    pool, _ = _pool()
+    if pool is not None:
+        return pool.submit(function, *args)
+    future = Future()
+    try:
+        future.set_result(function(*args))
+    except Exception as error:  # delivered by result(), as from the pool
+        future.set_exception(error)
+    return future

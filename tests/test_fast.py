@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
-from mitsuba_mrt import fast, fast_jit
+from mitsuba_mrt import fast, fast_jit, threads
 from mitsuba_mrt.compose import ALBEDO_EPS
 from mitsuba_mrt.edges import quadtree_fill, region_boxes, smooth_ids
 from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, separable_cubic
@@ -159,3 +159,26 @@ def test_grouped_fits_equal_one_fit_per_pixel():
     assert lost.any() and not lost.all()
     per_pixel[lost] = values[p.nearest_rows[py[lost]], p.nearest_cols[px[lost]]]
     assert np.allclose(grouped, per_pixel, rtol=1e-12, atol=1e-12)
+
+
+def test_values_beside_the_ids_equal_one_thread(monkeypatch):
+    # the cubic runs on a worker while the ids are smoothed; on one core it
+    # runs first, in line, and the image must not change
+    p = grid_pattern(48, 40, 0.15)
+    rng = np.random.default_rng(2)
+    shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)
+    t = trace_from(p, rng.random((p.count, 3)), shape_index=shapes)
+    pooled = reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
+    monkeypatch.setattr(threads, "_pool", lambda: (None, 1))
+    inline = reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
+    assert np.array_equal(pooled.image, inline.image)
+    assert pooled.stats == inline.stats
+
+
+def test_worker_errors_come_out_of_the_result(monkeypatch):
+    future = threads.beside(np.linalg.cholesky, -np.eye(2))
+    with pytest.raises(np.linalg.LinAlgError):
+        future.result()
+    monkeypatch.setattr(threads, "_pool", lambda: (None, 1))
+    with pytest.raises(np.linalg.LinAlgError):
+        threads.beside(np.linalg.cholesky, -np.eye(2)).result()
