@@ -341,16 +341,19 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     """
     if early is None:
         early = early_values(pattern, grid_ids, grid_values)
-    out = early.image
+    out = np.ascontiguousarray(early.image)  # (it is already: no copy)
+    pixels = out.reshape(-1, out.shape[2])  # a view, written through
     slow = early.stencil_ids != id_map
     for value, fill in (constant or {}).items():
         near_edge = slow & (id_map == value)
-        out[near_edge] = fill
+        pixels[np.flatnonzero(near_edge)] = fill
         slow &= ~near_edge
-    py, px = np.nonzero(slow)
-    if len(py):
-        out[py, px] = local_poly_fit(pattern, grid_ids, grid_values, py, px, id_map[py, px])
-    return out, len(py)
+    index = np.flatnonzero(slow)  # flat indices: cheaper than 2-D nonzero and scatter
+    if len(index):
+        py, px = np.divmod(index, pattern.width)
+        pixels[index] = local_poly_fit(pattern, grid_ids, grid_values, py, px,
+                                       id_map.ravel()[index])
+    return out, len(index)
 
 
 def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
@@ -374,12 +377,12 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     grid_ids = sample_ids.reshape(pattern.grid_shape)
     values = TracedGridValues.start(pattern, trace, sample_ids, stats)  # beside the ids
     id_map = pattern.nearest_image(grid_ids)
-    stats["regions"] = int(len(np.unique(sample_ids)))
+    boxes = region_boxes(pattern, grid_ids)  # one per id
+    stats["regions"] = len(boxes)
     if stats["regions"] == 1:
         stats["skipped_edge_finding"] += 1
     else:
-        id_map = smooth_ids(id_map, params.filter_sigma, params.filter_cutoff,
-                            boxes=region_boxes(pattern, grid_ids))
+        id_map = smooth_ids(id_map, params.filter_sigma, params.filter_cutoff, boxes=boxes)
     edges_s = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -432,8 +435,7 @@ class TracedGridValues:
             self.pattern, self.grid_ids, self.grid_values, id_map, self.constant,
             self.early.result())
         image = interp if interp.shape[2] == 3 else interp[..., :3] * interp[..., 3:]
-        image[np.ix_(self.pattern.rows, self.pattern.cols)] = self.trace.radiance.reshape(
-            self.pattern.grid_shape + (3,))
+        self.pattern.put_traced(image, self.trace.radiance)
         stats["edge_pixels"] = int(edge_pixels)
         return image
 

@@ -93,7 +93,23 @@ class SamplePattern:
         grid = np.asarray(grid_values)
         if grid.shape[:2] != self.grid_shape:  # per-sample values (count, ...)
             grid = grid.reshape(self.grid_shape + grid.shape[1:])
-        return grid[self.nearest_rows[:, None], self.nearest_cols[None, :]]
+        return grid.take(self.nearest_rows, axis=0).take(self.nearest_cols, axis=1)
+
+    @cached_property
+    def pixel_index(self) -> np.ndarray:
+        """(count,) flat index ``row * width + col`` of each traced pixel, rows outer."""
+        return (self.rows[:, None] * self.width + self.cols[None, :]).ravel()
+
+    def put_traced(self, image: np.ndarray, values: np.ndarray) -> None:
+        """Write per-sample ``values`` (count, ...) into ``image`` (height, width, ...)
+        at the traced pixels, in place."""
+        values = np.asarray(values)
+        if image.flags.c_contiguous:  # one gather-free scatter over flat pixels
+            image.reshape((-1,) + image.shape[2:])[self.pixel_index] = values.reshape(
+                (self.count,) + image.shape[2:])
+        else:
+            image[np.ix_(self.rows, self.cols)] = values.reshape(
+                self.grid_shape + image.shape[2:])
 
     def to_image(self, grid_values: np.ndarray, fill=0) -> np.ndarray:
         """Scatter per-sample values (count, ...) into a full image."""
