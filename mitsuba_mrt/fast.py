@@ -215,17 +215,23 @@ _SLOT_ORDER = (5, 6, 9, 10, 0, 1, 2, 3, 4, 7, 8, 11, 12, 13, 14, 15)
 def _matching_slot(grid_ids: np.ndarray, cell_y: np.ndarray, cell_x: np.ndarray,
                    own: np.ndarray) -> np.ndarray:
     """First slot (in ``_SLOT_ORDER``) of each cell's 4 x 4 block whose sample
-    carries ``own``; -1 where none does."""
+    carries ``own``; -1 where none does.
+
+    The grid is padded (one row and column before it, two after) with an id
+    no pixel has, so every slot is one 1-D gather at a fixed offset.
+    """
     nr, nc = grid_ids.shape
+    missing = min(int(grid_ids.min()), int(own.min()) if len(own) else 0) - 1
+    padded = np.full((nr + 3, nc + 3), missing, dtype=grid_ids.dtype)
+    padded[1:nr + 1, 1:nc + 1] = grid_ids
+    padded = padded.ravel()
+    block = cell_y * (nc + 3) + cell_x  # padded index of each pixel's slot 0
     slot = np.full(len(own), -1, dtype=np.int64)
     todo = np.arange(len(own))
     for s in _SLOT_ORDER:
         if len(todo) == 0:
             break
-        gy = cell_y[todo] + (s // 4 - 1)
-        gx = cell_x[todo] + (s % 4 - 1)
-        inside = (gy >= 0) & (gy < nr) & (gx >= 0) & (gx < nc)
-        hit = inside & (grid_ids[np.clip(gy, 0, nr - 1), np.clip(gx, 0, nc - 1)] == own[todo])
+        hit = padded.take(block[todo] + (s // 4) * (nc + 3) + s % 4) == own[todo]
         slot[todo[hit]] = s
         todo = todo[~hit]
     return slot
@@ -375,7 +381,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     start = time.perf_counter()
     sample_ids = trace.ids(params.rule_for("fast"))
     grid_ids = sample_ids.reshape(pattern.grid_shape)
-    values = TracedGridValues.start(pattern, trace, sample_ids, stats)  # beside the ids
+    values = TracedGridValues.start(pattern, trace, sample_ids)  # beside the ids
     id_map = pattern.nearest_image(grid_ids)
     boxes = region_boxes(pattern, grid_ids)  # one per id
     stats["regions"] = len(boxes)
@@ -395,10 +401,10 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
 class TracedGridValues:
     """Within-id interpolation of the traced grid, in two halves.
 
-    :meth:`start` does what needs no final pixel ids (it chooses the values
-    to interpolate and starts :func:`early_values` on a worker thread), so a
-    caller can find the ids meanwhile; :meth:`finish` takes them and fits
-    the pixels near edges.
+    :meth:`start` launches, on a worker thread, all that needs no final
+    pixel ids (choosing the values to interpolate, then
+    :func:`early_values` on them), so a caller can find the ids meanwhile;
+    :meth:`finish` takes them and fits the pixels near edges.
     Radiance is interpolated directly when albedo is constant within every
     id; otherwise irradiance (radiance / albedo) and albedo are, with the
     same weights, and multiplied back.  A black background is filled, and
@@ -407,44 +413,51 @@ class TracedGridValues:
 
     pattern: SamplePattern
     trace: SparseTrace
-    grid_ids: np.ndarray     # sample ids, shape pattern.grid_shape
-    grid_values: np.ndarray  # float32, grid shape + (3,) radiance or (6,) irradiance and albedo
-    constant: dict           # id -> fill value, for ids never interpolated
-    early: Future            # of early_values(pattern, grid_ids, grid_values)
+    grid_ids: np.ndarray  # sample ids, shape pattern.grid_shape
+    early: Future         # of _values_and_early(pattern, trace, sample_ids)
 
     @classmethod
-    def start(cls, pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
-              stats: Counter) -> "TracedGridValues":
-        """Choose the values and start :func:`early_values` on them; skips
-        are counted in ``stats``."""
-        grid_ids = sample_ids.reshape(pattern.grid_shape)
-        albedo = safe_albedo(trace.albedo)
-        constant = black_background(sample_ids, trace.radiance, stats)
-        if _albedo_constant_per_id(sample_ids, albedo):
-            stats["skipped_albedo_division"] += 1
-            values = trace.radiance.astype(np.float32)
-        else:
-            values = np.concatenate([trace.radiance / albedo, albedo], axis=1).astype(np.float32)
-        values = values.reshape(pattern.grid_shape + (values.shape[1],))
-        return cls(pattern, trace, grid_ids, values, constant,
-                   beside(early_values, pattern, grid_ids, values))
+    def start(cls, pattern: SamplePattern, trace: SparseTrace,
+              sample_ids: np.ndarray) -> "TracedGridValues":
+        """Launch the id-independent half."""
+        return cls(pattern, trace, sample_ids.reshape(pattern.grid_shape),
+                   beside(_values_and_early, pattern, trace, sample_ids))
 
     def finish(self, id_map: np.ndarray, stats: Counter) -> np.ndarray:
-        """Radiance (height, width, 3) with every pixel's values from its own id."""
+        """Radiance (height, width, 3) with every pixel's values from its own id;
+        skips and the number of pixels fitted near edges go to ``stats``."""
+        grid_values, constant, skips, early = self.early.result()
+        stats.update(skips)
         interp, edge_pixels = interpolate_within_ids(
-            self.pattern, self.grid_ids, self.grid_values, id_map, self.constant,
-            self.early.result())
+            self.pattern, self.grid_ids, grid_values, id_map, constant, early)
         image = interp if interp.shape[2] == 3 else interp[..., :3] * interp[..., 3:]
         self.pattern.put_traced(image, self.trace.radiance)
         stats["edge_pixels"] = int(edge_pixels)
         return image
 
 
+def _values_and_early(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray):
+    """The grid values to interpolate (float32, grid shape + (3,) radiance or
+    (6,) irradiance and albedo), the constant ids, the skips, and
+    :func:`early_values` of those values."""
+    skips = Counter()
+    albedo = safe_albedo(trace.albedo)
+    constant = black_background(sample_ids, trace.radiance, skips)
+    if _albedo_constant_per_id(sample_ids, albedo):
+        skips["skipped_albedo_division"] += 1
+        values = trace.radiance.astype(np.float32)
+    else:
+        values = np.concatenate([trace.radiance / albedo, albedo], axis=1).astype(np.float32)
+    values = values.reshape(pattern.grid_shape + (values.shape[1],))
+    return values, constant, skips, early_values(
+        pattern, sample_ids.reshape(pattern.grid_shape), values)
+
+
 def interpolate_traced_grid(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
                             id_map: np.ndarray, stats: Counter) -> np.ndarray:
     """Radiance at every pixel from the traced grid, within each pixel's id
     (both halves of :class:`TracedGridValues` in one call)."""
-    return TracedGridValues.start(pattern, trace, sample_ids, stats).finish(id_map, stats)
+    return TracedGridValues.start(pattern, trace, sample_ids).finish(id_map, stats)
 
 
 def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter) -> dict:
