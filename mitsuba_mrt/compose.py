@@ -137,6 +137,30 @@ def region_albedo(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndar
     return out
 
 
+def albedo_constant_per_id(sample_ids: np.ndarray, albedo: np.ndarray) -> bool:
+    """True when every id's samples share one albedo: a spread of at most
+    ``ALBEDO_EPS`` per channel, the criterion of :func:`region_albedo`.
+
+    Then interpolating radiance is interpolating irradiance times one
+    albedo per id (the interpolants are linear in the values), and the
+    division by albedo and the multiplication back can be skipped.
+
+    Examples
+    --------
+    >>> albedo_constant_per_id(np.array([1, 1, 2]), np.array([[0.5], [0.5], [0.9]]))
+    True
+    """
+    order = np.argsort(sample_ids, kind="stable")
+    ids = sample_ids[order]
+    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
+    for channel in np.asarray(albedo).T:  # channel by channel: often column-major
+        values = channel[order]
+        spread = np.maximum.reduceat(values, starts) - np.minimum.reduceat(values, starts)
+        if spread.max() > ALBEDO_EPS:
+            return False
+    return True
+
+
 def compose(irradiance: np.ndarray, albedo: np.ndarray, known_mask: np.ndarray,
             known_radiance: np.ndarray) -> np.ndarray:
     """Colour image: ``irradiance * albedo``, with traced pixels kept exactly.

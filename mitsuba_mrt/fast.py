@@ -30,7 +30,7 @@ import numpy as np
 from scipy import sparse
 
 from . import fast_jit
-from .compose import ALBEDO_EPS, safe_albedo
+from .compose import albedo_constant_per_id, safe_albedo
 from .edges import region_boxes, smooth_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
@@ -443,7 +443,7 @@ def _values_and_early(pattern: SamplePattern, trace: SparseTrace, sample_ids: np
     skips = Counter()
     albedo = safe_albedo(trace.albedo)
     constant = black_background(sample_ids, trace.radiance, skips)
-    if _albedo_constant_per_id(sample_ids, albedo):
+    if albedo_constant_per_id(sample_ids, albedo):
         skips["skipped_albedo_division"] += 1
         values = trace.radiance.astype(np.float32)
     else:
@@ -468,20 +468,6 @@ def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counte
         stats["skipped_background"] += 1
         return {0: 0.0}
     return {}
-
-
-def _albedo_constant_per_id(sample_ids: np.ndarray, albedo: np.ndarray) -> bool:
-    """True when every id's samples share one albedo: a spread of at most
-    ``ALBEDO_EPS`` per channel, the criterion of :func:`~mitsuba_mrt.compose.region_albedo`."""
-    order = np.argsort(sample_ids, kind="stable")
-    ids = sample_ids[order]
-    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
-    for channel in np.asarray(albedo).T:  # channel by channel: often column-major
-        values = channel[order]
-        spread = np.maximum.reduceat(values, starts) - np.minimum.reduceat(values, starts)
-        if spread.max() > ALBEDO_EPS:
-            return False
-    return True
 
 
 register_mode("fast", fast_reconstruct)

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from .compose import compose, demodulate, region_albedo
+from .compose import albedo_constant_per_id, compose, demodulate, region_albedo, safe_albedo
 from .edges import quadtree_fill, region_boxes, smooth_ids
 from .errors import MRTError
 from .ids import ID_RULES, encode_ids
@@ -199,13 +199,21 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
     timings["edges"] = time.perf_counter() - start
 
     start = time.perf_counter()
+    # one albedo per id: radiance interpolates as albedo x irradiance would
+    modulated = not albedo_constant_per_id(sample_ids, safe_albedo(trace.albedo))
     interp = interpolate_regions(
-        ids, pattern.pixel_xy, sample_ids, demodulate(trace.radiance, trace.albedo),
+        ids, pattern.pixel_xy, sample_ids,
+        demodulate(trace.radiance, trace.albedo) if modulated else trace.radiance,
         max_inpoints=params.max_inpoints, num_cappoints=params.num_cappoints,
         rbf_degree=params.rbf_degree)
-    albedo = region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo,
-                           nearest=pattern.nearest_image(np.arange(pattern.count)))
-    image = compose(interp.values, albedo, pattern.mask, trace.radiance)
+    if modulated:
+        albedo = region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo,
+                               nearest=pattern.nearest_image(np.arange(pattern.count)))
+        image = compose(interp.values, albedo, pattern.mask, trace.radiance)
+    else:
+        stats["skipped_albedo_division"] += 1
+        image = interp.values
+        pattern.put_traced(image, trace.radiance)
     timings["interpolate"] = time.perf_counter() - start
     stats.update(interp.counts)
     stats["regions"] = int(len(np.unique(ids)))

@@ -3,7 +3,7 @@ import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
 from mitsuba_mrt import fast, fast_jit, threads
-from mitsuba_mrt.compose import ALBEDO_EPS
+from mitsuba_mrt.compose import ALBEDO_EPS, albedo_constant_per_id
 from mitsuba_mrt.edges import quadtree_fill, region_boxes, smooth_ids
 from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, separable_cubic
 
@@ -121,12 +121,12 @@ def test_albedo_constancy_is_the_spread_per_id_not_neighbour_steps():
     # a slow ramp: each step is below ALBEDO_EPS, the whole spread is not
     ids = np.repeat([3, 5], 50)
     albedo = np.full((100, 3), 0.5)
-    assert fast._albedo_constant_per_id(ids, albedo)
+    assert albedo_constant_per_id(ids, albedo)
     albedo[:50, 1] += np.arange(50) * 0.5 * ALBEDO_EPS
-    assert not fast._albedo_constant_per_id(ids, albedo)
+    assert not albedo_constant_per_id(ids, albedo)
     albedo[:50, 1] = 0.5 + 0.5 * ALBEDO_EPS  # within tolerance
     albedo[50:, 2] = 0.9  # another id, another (constant) albedo
-    assert fast._albedo_constant_per_id(ids, np.asfortranarray(albedo))
+    assert albedo_constant_per_id(ids, np.asfortranarray(albedo))
 
 
 def test_grouped_fits_equal_one_fit_per_pixel():

@@ -63,9 +63,17 @@ def test_one_id_skips_edge_finding(variant):
         assert len(np.unique(result.ids)) == 1
 
 
-def test_constant_albedo_skips_demodulation(variant):
+def test_constant_albedo_skips_demodulation(variant, monkeypatch):
     scene = mi.load_string(small_scene_xml(32))
-    assert mitsuba_mrt.render(scene, mode="fast").stats["skipped_albedo_division"] == 1
+    for mode in ("fast", "paper"):
+        assert mitsuba_mrt.render(scene, mode=mode).stats["skipped_albedo_division"] == 1
+    # paper mode: interpolating radiance is interpolating irradiance x albedo
+    skipped = mitsuba_mrt.render(scene, mode="paper")
+    from mitsuba_mrt import pipeline
+    monkeypatch.setattr(pipeline, "albedo_constant_per_id", lambda ids, albedo: False)
+    divided = mitsuba_mrt.reconstruct(skipped.pattern, skipped.trace, mode="paper")
+    assert "skipped_albedo_division" not in divided.stats
+    assert np.allclose(skipped.image, divided.image, rtol=1e-9, atol=1e-12)
 
 
 def test_skips_reach_the_json(tmp_path):
