@@ -141,7 +141,9 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
     result = InterpolationResult(np.zeros((height, width, sample_values.shape[1])))
     flat_ids = id_map.ravel()
     order = np.argsort(flat_ids, kind="stable")
-    region_ids, starts = np.unique(flat_ids[order], return_index=True)
+    sorted_ids = flat_ids[order]  # runs of equal ids: no second sort for np.unique
+    starts = np.flatnonzero(np.concatenate([[True], sorted_ids[1:] != sorted_ids[:-1]]))
+    region_ids = sorted_ids[starts]
     bounds = np.append(starts, len(order))
     sample_order = np.argsort(sample_ids, kind="stable")
     sample_region, sample_starts = np.unique(sample_ids[sample_order], return_index=True)

@@ -216,7 +216,9 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
         pattern.put_traced(image, trace.radiance)
     timings["interpolate"] = time.perf_counter() - start
     stats.update(interp.counts)
-    stats["regions"] = int(len(np.unique(ids)))
+    # every id of the map was interpolated, filled as constant, or had no samples
+    stats["regions"] = sum(interp.counts[key] for key in ("rbf", "skipped_constant_ids",
+                                                          "no_samples"))
     return Reconstruction(image, ids, pattern.mask, timings, stats)
 
 

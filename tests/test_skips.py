@@ -50,6 +50,7 @@ def test_constant_ids_are_filled_in_paper_mode(variant):
     result = mitsuba_mrt.render(sphere_scene(), mode="paper")
     assert result.stats["skipped_constant_ids"] == 2
     assert result.stats["skipped_background"] == 1
+    assert result.stats["regions"] == len(np.unique(result.ids))  # counted, not re-found
 
 
 def test_one_id_skips_edge_finding(variant):
