@@ -15,32 +15,10 @@ from scipy.spatial.distance import cdist
 
 from . import rbf_fast
 from .errors import MRTError
-from .rbf_solve import solve_linear_rbf
-from .threads import for_row_blocks
+from .rbf_solve import solve_linear_rbf_at
 
 #: Elements of the distance matrix evaluated at once (about 32 MB of float64).
 EVAL_BLOCK_ELEMENTS = 1 << 22
-
-
-#: Distance matrices with at least this many rows are computed in row blocks,
-#: one per core, on threads (scipy's ``cdist`` releases the GIL).
-PARALLEL_ROWS = 512
-
-
-def pairwise_distances(points: np.ndarray) -> np.ndarray:
-    """``cdist(points, points)``, in row blocks on all cores when large.
-
-    Examples
-    --------
-    >>> pairwise_distances(np.array([[0.0, 0.0], [3.0, 4.0]]))
-    array([[0., 5.],
-           [5., 0.]])
-    """
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    out = np.empty((len(points), len(points)))
-    for_row_blocks(lambda a, b: cdist(points[a:b], points, out=out[a:b]), len(points),
-                   PARALLEL_ROWS)
-    return out
 
 
 class LinearRBF:
@@ -92,8 +70,8 @@ class LinearRBF:
         self._degree = degree
         self._basis = self._polynomial_basis(self._centres, degree)
         try:
-            self._weights, self._poly_coeffs = solve_linear_rbf(
-                pairwise_distances(self._centres), self._poly(self._centres), values)
+            self._weights, self._poly_coeffs = solve_linear_rbf_at(
+                self._centres, self._poly(self._centres), values)
         except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
             raise MRTError("RBF system is singular: centres must be distinct") from None
 

@@ -27,6 +27,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 from scipy.linalg import blas, lapack
+from scipy.spatial.distance import cdist
+
+from .threads import for_row_blocks
 
 #: Systems smaller than this are solved by float64 LU directly.
 MIN_SIZE = 128
@@ -37,6 +40,69 @@ TOLERANCE = 1e-12
 ACCEPTABLE = 1e-9
 #: Most refinement steps before falling back to float64 LU.
 MAX_STEPS = 30
+#: Distance triangles with at least this many rows are computed on all cores.
+PARALLEL_ROWS = 512
+#: Rows of the distance triangle per ``cdist`` call (a block stays in cache
+#: while it is copied and negated).
+CHUNK_ROWS = 64
+
+
+def solve_linear_rbf_at(centres: np.ndarray, poly: np.ndarray,
+                        values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`solve_linear_rbf` for ``A_ij = |centres_i - centres_j|``, (n, d) centres.
+
+    Computes only what the solver reads: for the float32-Cholesky path the
+    upper triangles of ``A`` and ``-A`` (:func:`distance_triangles`), for
+    float64 LU the whole matrix.  The answer is the same, bit for bit.
+
+    Examples
+    --------
+    >>> c = np.arange(200.0)[:, None]
+    >>> w, p = solve_linear_rbf_at(c, np.ones((200, 1)), c.copy())
+    >>> bool(np.allclose(np.abs(c - c.T) @ w + p, c))
+    True
+    """
+    centres = np.ascontiguousarray(centres, dtype=np.float64)
+    n, m = poly.shape
+    if n >= MIN_SIZE and n > m + 1:
+        distances, negated = distance_triangles(centres)
+        solved = _refined_cholesky(distances, poly, values, negated)
+        if solved is not None:
+            return solved
+        upper = np.triu(distances)
+        return _lu(upper + np.triu(distances, 1).T, poly, values)
+    return _lu(cdist(centres, centres), poly, values)
+
+
+def distance_triangles(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Upper triangles (``j >= i``) of ``|p_i - p_j|`` in float64 and of its
+    negation in float32, the rest of both (n, n) arrays left unset.
+
+    The upper triangle of a C-ordered array is the lower triangle of its
+    Fortran view, the only part that :func:`_refined_cholesky`'s BLAS and
+    LAPACK calls read; it is half the work of ``cdist``, and the negation is
+    made while each block is in cache, on all cores.
+
+    Examples
+    --------
+    >>> d, neg = distance_triangles(np.array([[0.0, 0.0], [3.0, 4.0]]))
+    >>> float(d[0, 1]), float(neg[0, 1]), float(d[1, 1])
+    (5.0, -5.0, 0.0)
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    n = len(points)
+    distances = np.empty((n, n))
+    negated = np.empty((n, n), dtype=np.float32)
+
+    def rows(start, stop):
+        for lo in range(start, stop, CHUNK_ROWS):
+            hi = min(lo + CHUNK_ROWS, stop)
+            block = cdist(points[lo:hi], points[lo:])
+            distances[lo:hi, lo:] = block
+            np.negative(block, out=negated[lo:hi, lo:], casting="same_kind")
+
+    for_row_blocks(rows, n, PARALLEL_ROWS, upper_triangle=True)
+    return distances, negated
 
 
 def solve_linear_rbf(distances: np.ndarray, poly: np.ndarray,
@@ -109,8 +175,12 @@ def _reflect(vectors, x: np.ndarray, transpose: bool) -> np.ndarray:
     return x
 
 
-def _refined_cholesky(distances, poly, values):
-    """The float32-factor, float64-refined solve; None when it cannot be trusted."""
+def _refined_cholesky(distances, poly, values, negated=None):
+    """The float32-factor, float64-refined solve; None when it cannot be trusted.
+
+    Only the upper triangles (C order) of ``distances`` and of ``negated``
+    (float32 ``-distances``, computed here when not given; overwritten) are read.
+    """
     n, m = poly.shape
     k = values.shape[1]
     vectors, r_factor = _householder(poly if m else np.ones((n, 1)))
@@ -118,7 +188,9 @@ def _refined_cholesky(distances, poly, values):
 
     # -Q' A Q in float32, one triangle: symmetric rank-2 updates, one per reflector.
     # A is symmetric, so its C-ordered transpose is the Fortran array BLAS wants.
-    negated = np.negative(distances, dtype=np.float32).T
+    if negated is None:
+        negated = np.negative(distances, dtype=np.float32)
+    negated = negated.T
     for v in vectors:
         v32 = v.astype(np.float32)
         y = blas.ssymv(1.0, negated, v32, lower=1).astype(np.float64)

@@ -25,12 +25,15 @@ def _pool() -> tuple[ThreadPoolExecutor | None, int]:
             else None), workers
 
 
-def for_row_blocks(function, rows: int, min_rows: int = 512) -> None:
+def for_row_blocks(function, rows: int, min_rows: int = 512,
+                   upper_triangle: bool = False) -> None:
     """Call ``function(start, stop)`` on contiguous blocks covering ``range(rows)``.
 
     One block per core, on threads, when ``rows >= min_rows`` and there is
     more than one core; else one call on the calling thread.  ``function``
-    must only write rows ``start:stop`` of its output.
+    must only write rows ``start:stop`` of its output.  The blocks hold equal
+    numbers of rows, or, with ``upper_triangle``, equal areas of the upper
+    triangle of a square matrix (row ``i`` costing ``rows - i``).
 
     Examples
     --------
@@ -44,7 +47,9 @@ def for_row_blocks(function, rows: int, min_rows: int = 512) -> None:
     if pool is None or rows < min_rows:
         function(0, rows)
         return
-    cuts = np.linspace(0, rows, workers + 1).astype(int).tolist()
+    share = np.linspace(0.0, 1.0, workers + 1)
+    cuts = (rows * (1.0 - np.sqrt(1.0 - share)) if upper_triangle else rows * share)
+    cuts = np.round(cuts).astype(int).tolist()
     futures = [pool.submit(function, a, b) for a, b in zip(cuts[:-2], cuts[1:-1])]
     function(cuts[-2], cuts[-1])  # the last block on the calling thread
     for future in futures:

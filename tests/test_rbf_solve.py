@@ -91,3 +91,54 @@ def test_a_refinement_that_stalls_above_the_tolerance_hands_over_to_lu(monkeypat
     ours = rbf_solve.solve_linear_rbf(*system)
     ref = lu_reference(*system)
     assert np.array_equal(ours[0], ref[0])  # the LU answer itself
+
+
+def pixel_centres(n, seed=0):
+    r = np.random.default_rng(seed)
+    grid = np.stack(np.meshgrid(np.arange(0, 600, 3), np.arange(0, 300, 3)), -1).reshape(-1, 2)
+    xy = grid[r.choice(len(grid), n, replace=False)].astype(float)
+    return (xy - xy.mean(0)) / (np.ptp(xy, 0).max() / 2)
+
+
+@pytest.mark.parametrize("n", [5, 700])  # one block, and row blocks on threads
+def test_distance_triangles_are_cdist_above_the_diagonal(n, monkeypatch):
+    monkeypatch.setattr(rbf_solve, "CHUNK_ROWS", 7)  # chunks that do not divide the rows
+    xy = pixel_centres(n, seed=n)
+    distances, negated = rbf_solve.distance_triangles(xy)
+    upper = np.triu(np.ones((n, n), dtype=bool))
+    full = cdist(xy, xy)
+    assert np.array_equal(distances[upper], full[upper])
+    assert negated.dtype == np.float32
+    assert np.array_equal(negated[upper], -full[upper].astype(np.float32))
+
+
+@pytest.mark.parametrize("degree", [-1, 1])
+def test_the_solver_reads_only_the_upper_triangles(degree):
+    xy = pixel_centres(600, seed=degree + 5)
+    values = pixel_system(600, degree, seed=degree + 5)[2]
+    distances = cdist(xy, xy)
+    poly = np.zeros((600, 0)) if degree < 0 else np.hstack([np.ones((600, 1)), xy])
+    tri, negated = rbf_solve.distance_triangles(xy)
+    lower = np.tril(np.ones((600, 600), dtype=bool), -1)
+    tri[lower] = np.nan  # anything read from below the diagonal would show
+    negated[lower] = np.nan
+    ours = rbf_solve._refined_cholesky(tri, poly, values, negated)
+    theirs = rbf_solve._refined_cholesky(distances, poly, values)
+    assert ours is not None and theirs is not None
+    for a, b in zip(ours, theirs):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("n", [rbf_solve.MIN_SIZE - 1, 400])
+@pytest.mark.parametrize("stalls", [False, True])
+def test_solving_from_centres_equals_solving_from_the_matrix(n, stalls, monkeypatch):
+    if stalls:  # the float32 path gives up: LU on the mirrored triangle
+        monkeypatch.setattr(rbf_solve, "TOLERANCE", 0.0)
+        monkeypatch.setattr(rbf_solve, "ACCEPTABLE", 0.0)
+    xy = pixel_centres(n, seed=3)
+    poly = np.hstack([np.ones((n, 1)), xy])
+    values = np.stack([np.sin(4 * xy[:, 0]), xy[:, 1] ** 2], axis=1)
+    ours = rbf_solve.solve_linear_rbf_at(xy, poly, values)
+    theirs = rbf_solve.solve_linear_rbf(cdist(xy, xy), poly, values)
+    for a, b in zip(ours, theirs):
+        assert np.array_equal(a, b)
