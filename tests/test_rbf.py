@@ -116,6 +116,16 @@ def fast_calls(monkeypatch):
     return calls
 
 
+def fast_matches_dense(rbf, points, monkeypatch):
+    """``rbf(points)``, checked to take the fast kernel once and to agree with
+    the dense path; returned for further checks."""
+    calls = fast_calls(monkeypatch)
+    fast = rbf(points)
+    assert calls == [len(points)]
+    assert_close(fast, dense_reference(rbf, points, monkeypatch))
+    return fast
+
+
 def assert_close(fast, exact, rtol=1e-4):
     """max |fast - exact| <= rtol * max |exact|, channel by channel."""
     fast, exact = np.atleast_2d(fast.T).T, np.atleast_2d(exact.T).T
@@ -175,10 +185,7 @@ def test_fast_path_with_centres_in_a_corner_and_points_far_away(monkeypatch):
     centres = jittered_centres(60, 300, gen)                 # all in [0, 60)^2
     rbf = LinearRBF(centres, noisy_colours(centres, gen), degree=-1)
     pixels = pixel_grid(150, 120, lo=(700, 900))             # no centre nearby
-    calls = fast_calls(monkeypatch)
-    fast = rbf(pixels)
-    assert calls == [len(pixels)]
-    assert_close(fast, dense_reference(rbf, pixels, monkeypatch))
+    fast_matches_dense(rbf, pixels, monkeypatch)
 
 
 def test_fast_path_on_a_thin_region(monkeypatch):
@@ -189,10 +196,7 @@ def test_fast_path_on_a_thin_region(monkeypatch):
     band = np.unique(band, axis=0)
     centres = band[gen.choice(len(band), 700, replace=False)]
     rbf = LinearRBF(centres, noisy_colours(centres, gen), degree=1)
-    calls = fast_calls(monkeypatch)
-    fast = rbf(band)
-    assert calls == [len(band)]
-    assert_close(fast, dense_reference(rbf, band, monkeypatch))
+    fast_matches_dense(rbf, band, monkeypatch)
 
 
 def test_fast_path_for_grey_and_scalar_values(monkeypatch):
@@ -202,10 +206,8 @@ def test_fast_path_for_grey_and_scalar_values(monkeypatch):
     pixels = pixel_grid(200, 200)
     for values in (grey, grey[:, 0]):
         rbf = LinearRBF(centres, values, degree=0)
-        calls = fast_calls(monkeypatch)
-        fast = rbf(pixels)
-        assert calls == [len(pixels)] and fast.shape == (len(pixels),) + values.shape[1:]
-        assert_close(fast, dense_reference(rbf, pixels, monkeypatch))
+        fast = fast_matches_dense(rbf, pixels, monkeypatch)
+        assert fast.shape == (len(pixels),) + values.shape[1:]
     assert np.array_equal(fast, rbf(pixels.astype(np.float64)))  # integral floats too
 
 
