@@ -19,6 +19,7 @@ from .errors import MRTError
 from .ids import ID_RULES, encode_ids
 from .interpolate import interpolate_regions
 from .sampling import SamplePattern, check_fraction
+from .threads import jit_workers_parked
 
 
 @dataclass(frozen=True)
@@ -267,4 +268,5 @@ def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = 
     if shapes != ((n, 3), (n, 3), (n,), (n,)):
         raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
     check_radiance(trace.radiance)
-    return MODES[mode](pattern, trace, params, tracer)
+    with jit_workers_parked():  # none of Dr.Jit's workers busy-waits beside numpy
+        return MODES[mode](pattern, trace, params, tracer)

@@ -19,6 +19,7 @@ import numpy as np
 
 from .errors import MRTError
 from .pipeline import SparseTrace
+from .threads import jit_workers
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32
@@ -269,9 +270,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     spp = sampler.sample_count()
-    trace = (_trace_jit if is_jit() else _trace_scalar)(
-        scene, sensor, integrator if radiance else None, sampler, pixel_xy, spp, seed, lights,
-        lookup, aovs, rule)
+    with jit_workers():  # all of Dr.Jit's threads, also inside a reconstruction
+        trace = (_trace_jit if is_jit() else _trace_scalar)(
+            scene, sensor, integrator if radiance else None, sampler, pixel_xy, spp, seed,
+            lights, lookup, aovs, rule)
     radiance, albedo, shape_index, visible, path_id = trace
     curved = curved_mirror_indices(scene) if aovs else np.zeros(0, np.int64)
     return SparseTrace(radiance, albedo, shape_index, visible, len(lights), spp,

@@ -182,3 +182,52 @@ def test_worker_errors_come_out_of_the_result(monkeypatch):
     monkeypatch.setattr(threads, "_pool", lambda: (None, 1))
     with pytest.raises(np.linalg.LinAlgError):
         threads.beside(np.linalg.cholesky, -np.eye(2)).result()
+
+
+@pytest.fixture
+def three_jit_threads():
+    import drjit as dr
+
+    before = dr.thread_count()
+    dr.set_thread_count(3)
+    yield 3
+    dr.set_thread_count(before)
+
+
+def test_jit_workers_parked_then_restored(three_jit_threads):
+    import drjit as dr
+
+    with pytest.raises(ZeroDivisionError):
+        with threads.jit_workers_parked():
+            assert dr.thread_count() == 1
+            with threads.jit_workers():
+                assert dr.thread_count() == three_jit_threads
+            assert dr.thread_count() == 1
+            1 / 0
+    assert dr.thread_count() == three_jit_threads
+    with threads.jit_workers():  # not parked: nothing to do
+        assert dr.thread_count() == three_jit_threads
+
+
+@pytest.mark.skipif(not fast_jit.available(), reason="needs Dr.Jit's LLVM backend")
+def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, monkeypatch):
+    # Dr.Jit's idle workers busy-wait beside numpy: parked while the ids are
+    # smoothed, back for the fit kernels, and the caller's count is restored
+    import drjit as dr
+
+    seen = {}
+
+    def spy(name, function):
+        def wrapped(*args, **kwargs):
+            seen[name] = dr.thread_count()
+            return function(*args, **kwargs)
+        return wrapped
+
+    monkeypatch.setattr(fast, "smooth_ids", spy("smoothing", fast.smooth_ids))
+    monkeypatch.setattr(fast_jit, "_quadric_values", spy("fits", fast_jit._quadric_values))
+    p = grid_pattern(48, 40, 0.15)
+    shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)
+    t = trace_from(p, np.random.default_rng(4).random((p.count, 3)), shape_index=shapes)
+    reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
+    assert seen == {"smoothing": 1, "fits": three_jit_threads}
+    assert dr.thread_count() == three_jit_threads
