@@ -27,6 +27,12 @@ import os
 # rule); a value the user set is kept.
 os.environ.setdefault("OPENBLAS_THREAD_TIMEOUT", "16")
 
+from .allocator import keep_freed_memory  # noqa: E402
+
+# Large temporaries are reused instead of being faulted in afresh on every call
+# (see mitsuba_mrt.allocator; MITSUBA_MRT_MALLOC=system keeps glibc's defaults).
+keep_freed_memory()
+
 from .errors import MRTError
 from . import baselines, fast, idpass, refine  # noqa: F401  (register the modes beyond paper)
 from .pipeline import MODES, MRTParams, Reconstruction, SparseTrace, reconstruct

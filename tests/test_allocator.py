@@ -1,0 +1,31 @@
+import os
+
+import pytest
+
+from mitsuba_mrt import allocator
+
+
+def _glibc() -> bool:
+    try:
+        return os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc")
+    except (AttributeError, ValueError, OSError):
+        return False
+
+
+@pytest.mark.skipif(not _glibc(), reason="mallopt is glibc's")
+def test_thresholds_are_set_on_glibc(monkeypatch):
+    monkeypatch.delenv("MITSUBA_MRT_MALLOC", raising=False)
+    for name in allocator._USER_TUNING:
+        monkeypatch.delenv(name, raising=False)
+    assert allocator.keep_freed_memory() is True
+
+
+@pytest.mark.parametrize("name,value", [("MITSUBA_MRT_MALLOC", "system"),
+                                        ("MALLOC_TRIM_THRESHOLD_", "1000000"),
+                                        ("MALLOC_MMAP_THRESHOLD_", "65536")])
+def test_user_choices_are_kept(monkeypatch, name, value):
+    monkeypatch.setenv(name, value)
+    called = []
+    monkeypatch.setattr(allocator.ctypes, "CDLL", lambda *a: called.append(a))
+    assert allocator.keep_freed_memory() is False
+    assert called == []  # the C library was not even opened
