@@ -249,7 +249,7 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
 
     Returns
     -------
-    ndarray of int64, a new array.
+    ndarray, a new array of the dtype of ``ids`` (int64 if not an integer type).
 
     Examples
     --------
@@ -263,7 +263,9 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
         raise MRTError(f"filter_sigma must be a finite number >= 0, got {filter_sigma}")
     if not 0.0 <= filter_cutoff <= 1.0:
         raise MRTError(f"filter_cutoff must be in [0, 1], got {filter_cutoff}")
-    out = np.array(ids, dtype=np.int64, copy=True)
+    out = np.array(ids, copy=True)
+    if out.dtype.kind not in "iu":
+        out = out.astype(np.int64)
     if filter_sigma == 0.0:
         return out
     reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation

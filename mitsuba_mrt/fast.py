@@ -32,6 +32,7 @@ from scipy import sparse
 from . import fast_jit
 from .compose import albedo_constant_per_id, safe_albedo
 from .edges import region_boxes, smooth_ids
+from .ids import rank_ids
 from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
 from .threads import beside
@@ -379,21 +380,25 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     """
     stats = Counter()
     start = time.perf_counter()
-    sample_ids = trace.ids(params.rule_for("fast"))
-    grid_ids = sample_ids.reshape(pattern.grid_shape)
-    values = TracedGridValues.start(pattern, trace, sample_ids)  # beside the ids
-    id_map = pattern.nearest_image(grid_ids)
-    boxes = region_boxes(pattern, grid_ids)  # one per id
+    # the ids' ranks (int16): the same order and regions, a quarter of the bytes
+    labels, sample_ranks = rank_ids(trace.ids(params.rule_for("fast")))
+    background = int(np.searchsorted(labels, 0)) if labels[0] == 0 else -1
+    grid_ranks = sample_ranks.reshape(pattern.grid_shape)
+    values = TracedGridValues.start(pattern, trace, sample_ranks, background)  # beside the ids
+    rank_map = pattern.nearest_image(grid_ranks)
+    boxes = region_boxes(pattern, grid_ranks)  # one per id
     stats["regions"] = len(boxes)
     if stats["regions"] == 1:
         stats["skipped_edge_finding"] += 1
     else:
-        id_map = smooth_ids(id_map, params.filter_sigma, params.filter_cutoff, boxes=boxes)
+        rank_map = smooth_ids(rank_map, params.filter_sigma, params.filter_cutoff,
+                              background, boxes)
     edges_s = time.perf_counter() - start
 
     start = time.perf_counter()
-    image = values.finish(id_map, stats)
-    return Reconstruction(image, id_map, pattern.mask,
+    id_map = beside(labels.take, rank_map)  # back to ids, beside the fits
+    image = values.finish(rank_map, stats)
+    return Reconstruction(image, id_map.result(), pattern.mask,
                           {"edges": edges_s, "interpolate": time.perf_counter() - start}, stats)
 
 
@@ -413,15 +418,16 @@ class TracedGridValues:
 
     pattern: SamplePattern
     trace: SparseTrace
-    grid_ids: np.ndarray  # sample ids, shape pattern.grid_shape
-    early: Future         # of _values_and_early(pattern, trace, sample_ids)
+    grid_ids: np.ndarray  # sample ids (or their ranks), shape pattern.grid_shape
+    early: Future         # of _values_and_early(pattern, trace, sample_ids, background)
 
     @classmethod
-    def start(cls, pattern: SamplePattern, trace: SparseTrace,
-              sample_ids: np.ndarray) -> "TracedGridValues":
-        """Launch the id-independent half."""
+    def start(cls, pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
+              background: int = 0) -> "TracedGridValues":
+        """Launch the id-independent half; ``background`` is the id (or rank)
+        of the background in ``sample_ids``, -1 if none."""
         return cls(pattern, trace, sample_ids.reshape(pattern.grid_shape),
-                   beside(_values_and_early, pattern, trace, sample_ids))
+                   beside(_values_and_early, pattern, trace, sample_ids, background))
 
     def finish(self, id_map: np.ndarray, stats: Counter) -> np.ndarray:
         """Radiance (height, width, 3) with every pixel's values from its own id;
@@ -436,13 +442,14 @@ class TracedGridValues:
         return image
 
 
-def _values_and_early(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray):
+def _values_and_early(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
+                      background: int = 0):
     """The grid values to interpolate (float32, grid shape + (3,) radiance or
     (6,) irradiance and albedo), the constant ids, the skips, and
     :func:`early_values` of those values."""
     skips = Counter()
     albedo = safe_albedo(trace.albedo)
-    constant = black_background(sample_ids, trace.radiance, skips)
+    constant = black_background(sample_ids, trace.radiance, skips, background)
     if albedo_constant_per_id(sample_ids, albedo):
         skips["skipped_albedo_division"] += 1
         values = trace.radiance.astype(np.float32)
@@ -460,13 +467,15 @@ def interpolate_traced_grid(pattern: SamplePattern, trace: SparseTrace, sample_i
     return TracedGridValues.start(pattern, trace, sample_ids).finish(id_map, stats)
 
 
-def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter) -> dict:
-    """``{0: 0.0}`` when every background sample is black (it is then filled,
-    never interpolated; counted in ``stats``), else ``{}``."""
-    background = sample_ids == 0
-    if background.any() and not radiance[background].any():
+def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter,
+                     background: int = 0) -> dict:
+    """``{background: 0.0}`` when every sample of the ``background`` id is
+    black (it is then filled, never interpolated; counted in ``stats``),
+    else ``{}``."""
+    seen = sample_ids == background
+    if seen.any() and not radiance[seen].any():
         stats["skipped_background"] += 1
-        return {0: 0.0}
+        return {background: 0.0}
     return {}
 
 

@@ -67,3 +67,25 @@ def encode_ids(shape_index: np.ndarray, visible_lights: np.ndarray,
 def id_to_paper_float(ids: np.ndarray) -> np.ndarray:
     """The report's float id (shape + 0.5 per blocked light) of a paper-rule id."""
     return np.asarray(ids, dtype=np.float64) / 2.0
+
+
+def rank_ids(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct ids, sorted, and each id's rank among them.
+
+    Ranks keep the ids' order and equalities in a small integer type
+    (int16 below 32,768 distinct ids, else int32; -1 is free as a
+    sentinel), so that masks, copies and comparisons over whole images of
+    ids move a quarter of the bytes of int64 ids; ``labels[ranks]`` gives
+    the ids back.
+
+    Examples
+    --------
+    >>> labels, ranks = rank_ids(np.array([7, 0, 1 << 32, 7]))
+    >>> labels.tolist(), ranks.tolist(), ranks.dtype.name
+    ([0, 7, 4294967296], [1, 0, 2, 1], 'int16')
+    """
+    ids = np.asarray(ids)
+    ordered = np.sort(ids, axis=None)
+    labels = ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))] if ids.size else ordered
+    dtype = np.int16 if len(labels) < 1 << 15 else np.int32
+    return labels, np.searchsorted(labels, ids).astype(dtype)

@@ -219,3 +219,19 @@ def test_blur_is_gaussian_filter_bit_for_bit(sigma, row_blocks, monkeypatch):
     blurred = edges._blurred_mask(mask, edges.gaussian_weights(sigma, reach))
     expected = ndimage.gaussian_filter(mask.astype(np.float32), sigma)
     assert blurred.dtype == np.float32 and np.array_equal(blurred, expected)
+
+
+@pytest.mark.parametrize("with_background", [True, False])
+def test_smoothing_ranks_equals_smoothing_ids(with_background):
+    # the fast mode smooths int16 ranks of the ids; order and background kept
+    from mitsuba_mrt.ids import rank_ids
+
+    rng = np.random.default_rng(7)
+    ids = ndimage.zoom(rng.choice([0, 5, 1 << 33, 3 << 32, 9], (7, 8)), 9, order=0)
+    if not with_background:
+        ids[ids == 0] = 9
+    labels, ranks = rank_ids(ids)
+    background = int(np.searchsorted(labels, 0)) if labels[0] == 0 else -1
+    smoothed = smooth_ids(ranks, 1.0, 0.05, background)
+    assert smoothed.dtype == np.int16
+    assert np.array_equal(labels[smoothed], smooth_ids(ids, 1.0, 0.05))
