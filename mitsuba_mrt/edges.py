@@ -288,9 +288,34 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
         c0, c1 = max(h0 + cc[0] - reach, 0), min(h0 + cc[-1] + reach + 1, width)
         blurred = _blurred_mask(mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0], weights)
         peak = blurred.max()
-        if peak > 0.0:
-            np.copyto(out[r0:r1, c0:c1], value, where=blurred / peak > filter_cutoff)
+        if peak > 0.0:  # blurred / peak > cutoff, without the division
+            np.copyto(out[r0:r1, c0:c1], value,
+                      where=blurred >= least_above(filter_cutoff, peak))
     return out
+
+
+def least_above(cutoff: float, peak: np.float32) -> np.float32:
+    """The least float32 ``b`` with ``b / peak > cutoff`` in float32 arithmetic.
+
+    The quotient does not decrease as ``b`` grows, so ``blurred >= t`` selects
+    exactly the pixels that ``blurred / peak > cutoff`` selects (for float32
+    ``blurred``, and ``cutoff`` rounded to float32 as numpy compares a
+    float32 array with a Python float), without dividing the whole array.
+
+    Examples
+    --------
+    >>> t = least_above(0.05, np.float32(0.7))
+    >>> bool(t / np.float32(0.7) > np.float32(0.05)), bool(np.nextafter(t, 0) / np.float32(0.7) > np.float32(0.05))
+    (True, False)
+    """
+    cutoff, peak = np.float32(cutoff), np.float32(peak)
+    below, up = np.float32(0.0), np.float32(np.inf)
+    guess = np.float32(cutoff * peak)
+    while guess / peak > cutoff:  # step down to the last value not above
+        guess = np.nextafter(guess, below)
+    while not guess / peak > cutoff:  # then up to the first value above
+        guess = np.nextafter(guess, up)
+    return guess
 
 
 def gaussian_weights(sigma: float, reach: int) -> np.ndarray:

@@ -235,3 +235,16 @@ def test_smoothing_ranks_equals_smoothing_ids(with_background):
     smoothed = smooth_ids(ranks, 1.0, 0.05, background)
     assert smoothed.dtype == np.int16
     assert np.array_equal(labels[smoothed], smooth_ids(ids, 1.0, 0.05))
+
+
+def test_threshold_without_division_selects_what_the_division_does():
+    rng = np.random.default_rng(11)
+    peaks = np.concatenate([rng.random(300), [1.0, 0.999999, 1e-6, 0.5]]).astype(np.float32)
+    cutoffs = np.concatenate([rng.random(300), [0.0, 1.0, 0.05, 0.5]])
+    for peak, cutoff in zip(peaks[peaks > 0], cutoffs.tolist()):  # a Python float, as in smooth_ids
+        t = edges.least_above(cutoff, peak)
+        near = np.array([t, np.nextafter(t, np.float32(0)), np.nextafter(t, np.float32(2))],
+                        dtype=np.float32)
+        values = np.concatenate([near, (rng.random(50) * peak).astype(np.float32), [0, peak]])
+        values = values.astype(np.float32)
+        assert np.array_equal(values >= t, values / peak > cutoff), (peak, cutoff)
