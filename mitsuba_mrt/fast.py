@@ -382,7 +382,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     start = time.perf_counter()
     # the ids' ranks (int16): the same order and regions, a quarter of the bytes
     labels, sample_ranks = rank_ids(trace.ids(params.rule_for("fast")))
-    background = int(np.searchsorted(labels, 0)) if labels[0] == 0 else -1
+    background = 0 if labels[0] == 0 else -1  # ids are >= 0, so id 0 is rank 0
     grid_ranks = sample_ranks.reshape(pattern.grid_shape)
     values = TracedGridValues.start(pattern, trace, sample_ranks, background)  # beside the ids
     rank_map = pattern.nearest_image(grid_ranks)
