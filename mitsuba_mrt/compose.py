@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .ids import run_starts
+
 #: Albedo below which a channel is not demodulated.
 ALBEDO_EPS = 1e-6
 
@@ -152,7 +154,7 @@ def albedo_constant_per_id(sample_ids: np.ndarray, albedo: np.ndarray) -> bool:
     """
     order = np.argsort(sample_ids, kind="stable")
     ids = sample_ids[order]
-    starts = np.flatnonzero(np.concatenate([[True], ids[1:] != ids[:-1]]))
+    starts = run_starts(ids)
     for channel in np.asarray(albedo).T:  # channel by channel: often column-major
         values = channel[order]
         spread = np.maximum.reduceat(values, starts) - np.minimum.reduceat(values, starts)

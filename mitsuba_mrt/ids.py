@@ -86,6 +86,20 @@ def rank_ids(ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     ids = np.asarray(ids)
     ordered = np.sort(ids, axis=None)
-    labels = ordered[np.concatenate(([True], ordered[1:] != ordered[:-1]))] if ids.size else ordered
+    labels = ordered[run_starts(ordered)]
     dtype = np.int16 if len(labels) < 1 << 15 else np.int32
     return labels, np.searchsorted(labels, ids).astype(dtype)
+
+
+def run_starts(sorted_values: np.ndarray) -> np.ndarray:
+    """Index of the first element of each run of equal values in a sorted 1-D array.
+
+    Examples
+    --------
+    >>> run_starts(np.array([2, 2, 5, 7, 7, 7])).tolist()
+    [0, 2, 3]
+    """
+    values = np.asarray(sorted_values)
+    if values.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    return np.flatnonzero(np.concatenate(([True], values[1:] != values[:-1])))

@@ -16,6 +16,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .compose import query_workers
 from .errors import MRTError
+from .ids import run_starts
 from .rbf import LinearRBF
 
 #: Relative spread below which an id's samples count as all equal.
@@ -142,7 +143,7 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
     flat_ids = id_map.ravel()
     order = np.argsort(flat_ids, kind="stable")
     sorted_ids = flat_ids[order]  # runs of equal ids: no second sort for np.unique
-    starts = np.flatnonzero(np.concatenate([[True], sorted_ids[1:] != sorted_ids[:-1]]))
+    starts = run_starts(sorted_ids)
     region_ids = sorted_ids[starts]
     bounds = np.append(starts, len(order))
     sample_order = np.argsort(sample_ids, kind="stable")
