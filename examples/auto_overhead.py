@@ -35,9 +35,9 @@ def main():
             for _ in range(args.rounds):
                 full.append(mitsuba_mrt.render_reference(scene)[1])
                 result = mitsuba_mrt.render(scene)
-                auto.append(result.timings["total"])
+                auto.append(result.timings.total)
             f, a = statistics.median_low(full), statistics.median_low(auto)
-            used = result.stats.get("mode_used", "?")
+            used = result.mode_used
             print(f"{path.name:34s} {res:5d} {f:9.4f} {a:9.4f} {a / f:6.3f}  {used}")
             worst = max(worst, (a / f, f"{path.name} at {res}"))
     print(f"worst ratio {worst[0]:.3f} ({worst[1]})")

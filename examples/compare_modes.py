@@ -11,7 +11,7 @@ import argparse
 import time
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import paper_error, psnr
+from mitsuba_mrt.recon.metrics import paper_error, psnr
 
 
 def main():
@@ -35,7 +35,7 @@ def main():
         start = time.perf_counter()
         result = mitsuba_mrt.render(scene, mode=mode)
         seconds = time.perf_counter() - start
-        used = result.stats.get("mode_used", mode)
+        used = result.mode_used
         print(f"{mode:8s} {used:8s} {paper_error(result.image, reference):9.5f} "
               f"{psnr(result.image, reference):8.2f} {seconds:8.3f} {seconds / full_s:8.2f}")
 

@@ -18,7 +18,7 @@ import statistics
 import time
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import paper_error
+from mitsuba_mrt.recon.metrics import paper_error
 
 
 def main():
@@ -48,7 +48,7 @@ def main():
             result = mitsuba_mrt.render(scene, mode=mode)
             times[mode].append(time.perf_counter() - start)
             errors[mode] = paper_error(result.image, reference)
-            used[mode] = result.stats.get("mode_used", mode)
+            used[mode] = result.mode_used
     full = statistics.median(full_times)
     print(f"{args.scene} {args.res}x{args.res} {defines} [{variant}], median of {args.repeats}")
     print(f"{'mode':8s} {'used':8s} {'seconds':>8s} {'vs full':>8s} {'error vs full':>14s}")

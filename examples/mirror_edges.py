@@ -14,8 +14,8 @@ import argparse
 import numpy as np
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import edge_mask, error_map
-from mitsuba_mrt.trace import ordered_shapes
+from mitsuba_mrt.recon.metrics import edge_mask, error_map
+from mitsuba_mrt.renderer.trace import ordered_shapes
 
 
 def main():

@@ -15,8 +15,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mitsuba_mrt  # noqa: E402
-from mitsuba_mrt.imageio import atomic_path, srgb_encode  # noqa: E402
-from mitsuba_mrt.metrics import error_map, paper_error, psnr  # noqa: E402
+from mitsuba_mrt.app.imageio import atomic_path, srgb_encode  # noqa: E402
+from mitsuba_mrt.recon.metrics import error_map, paper_error, psnr  # noqa: E402
 
 
 def main():
@@ -39,7 +39,7 @@ def main():
     axes[0].set_title(f"full render ({ref_seconds:.2f} s)")
     axes[1].imshow(srgb_encode(result.image))
     axes[1].set_title(f"MRT ({args.mode}), f = {args.sample_fraction} "
-                      f"({result.timings['total']:.2f} s)")
+                      f"({result.timings.total:.2f} s)")
     shown = axes[2].imshow(np.log10(np.clip(err, 1e-4, 1)), cmap="inferno", vmin=-4, vmax=0)
     axes[2].set_title(f"error {paper_error(result.image, reference):.4f}, "
                       f"PSNR {psnr(result.image, reference):.1f} dB")

@@ -1,25 +1,22 @@
-"""The reconstruction: traced samples in, full image out (no Mitsuba here).
+"""The typed contracts between the stages: parameters, traces, results.
 
-``ids -> edge finder -> interpolation -> compose``, each stage a module of
-its own; this module validates the parameters once and times the stages.
+Plain dataclasses, serialised with :func:`dataclasses.asdict`; nothing here
+imports Mitsuba.
 """
 
 from __future__ import annotations
 
+import enum
 import math
-import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 
-from .compose import albedo_constant_per_id, compose, demodulate, region_albedo, safe_albedo
-from .edges import quadtree_fill, region_boxes, smooth_ids
 from .errors import MRTError
-from .ids import ID_RULES, encode_ids
-from .interpolate import interpolate_regions
-from .sampling import SamplePattern, check_fraction
-from .threads import jit_workers_parked
+from .recon.ids import ID_RULES, encode_ids
+from .recon.sampling import check_fraction
 
 
 @dataclass(frozen=True)
@@ -112,7 +109,7 @@ class SparseTrace:
         as one integer (equal to ``shape_index`` without mirrors).
     curved_mirror : ndarray of bool, shape (n,), optional
         True where the pixel-centre ray first hits a curved mirror (see
-        :func:`mitsuba_mrt.trace.curved_mirror_indices`); None when the
+        :func:`mitsuba_mrt.renderer.trace.curved_mirror_indices`); None when the
         scene has none.
     """
 
@@ -128,7 +125,7 @@ class SparseTrace:
     curved_mirror: np.ndarray | None = None
 
     def ids(self, rule: str) -> np.ndarray:
-        """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.ids`).
+        """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).
 
         The exact rule labels a pixel that sees a mirror by the chain of
         shapes along its specular path (``path_id``); the paper rule, like
@@ -136,6 +133,83 @@ class SparseTrace:
         """
         shapes = self.shape_index if rule == "paper" or self.path_id is None else self.path_id
         return encode_ids(shapes, self.visible_lights, self.num_lights, rule)
+
+
+@dataclass
+class Timings:
+    """Seconds spent per stage; ``other`` makes the parts add up to ``total``.
+
+    ``trace`` is the grid's trace (the pilot's, for ``auto``); ``trace_more``
+    every pixel traced beyond the grid (edges for ``refine``, the id pass and
+    thin regions for ``idpass``, ``auto``'s full-width band); ``full_render``
+    the full render that ``auto`` may fall back to.
+    """
+
+    trace: float = 0.0
+    trace_more: float = 0.0
+    edges: float = 0.0
+    interpolate: float = 0.0
+    full_render: float = 0.0
+    other: float = 0.0
+    total: float = 0.0
+
+    def close(self, total: float) -> "Timings":
+        """Set ``total`` and put what the stages do not account for into ``other``."""
+        self.total = total
+        self.other = max(0.0, total - (self.trace + self.trace_more + self.edges
+                                       + self.interpolate + self.full_render))
+        return self
+
+
+@dataclass
+class TracedCounts:
+    """Pixels traced with the nested integrator, by why they were traced.
+
+    ``grid`` the sample grid's; ``band`` ``auto``'s full-width pilot rows
+    beyond the grid; ``more`` the mode's own beyond both (edges for
+    ``refine``, thin regions for ``idpass``); ``full`` a full render's.
+    """
+
+    grid: int = 0
+    band: int = 0
+    more: int = 0
+    full: int = 0
+
+    @property
+    def total(self) -> int:
+        return self.grid + self.band + self.more + self.full
+
+
+@dataclass
+class Skips:
+    """Shortcuts a scene allowed, counted where they were taken.
+
+    Attributes
+    ----------
+    shadow_rays : int
+        Light visibility known without shadow rays (no point or spot light,
+        or a single sphere or planar shape).
+    edge_finding : int
+        A single id: no edges to find.
+    albedo_division : int
+        Albedo constant within every id: radiance interpolated directly.
+    constant_ids : int
+        Ids whose samples are all equal, filled rather than interpolated.
+    background : int
+        A black background filled rather than interpolated.
+    """
+
+    shadow_rays: int = 0
+    edge_finding: int = 0
+    albedo_division: int = 0
+    constant_ids: int = 0
+    background: int = 0
+
+    def add(self, other: "Skips") -> "Skips":
+        """Add ``other``'s counts to these; returns self."""
+        for name, value in asdict(other).items():
+            setattr(self, name, getattr(self, name) + value)
+        return self
 
 
 @dataclass
@@ -149,17 +223,50 @@ class Reconstruction:
     ids : ndarray of int64, shape (height, width)
         Region id of every pixel after the edge finder.
     traced_mask : ndarray of bool, shape (height, width)
-    timings : dict
-        Seconds spent in ``edges`` and ``interpolate`` (compose included).
+    timings : Timings
+        ``edges``, ``interpolate`` and, for modes that trace more, ``trace_more``.
+    skips : Skips
     stats : Counter
-        Region counts: ``regions``, ``rbf``, ``constant``, ``no_samples``.
+        Counts: ``regions``, and per mode ``rbf``, ``no_samples``,
+        ``edge_pixels``, ``refined_pixels``, ``sliver_pixels``, ...
     """
 
     image: np.ndarray
     ids: np.ndarray
     traced_mask: np.ndarray
-    timings: dict = field(default_factory=dict)
+    timings: Timings = field(default_factory=Timings)
+    skips: Skips = field(default_factory=Skips)
     stats: Counter = field(default_factory=Counter)
+
+
+class SeedStream(enum.IntEnum):
+    """Which sampler seed (an offset to the render's seed) a trace uses.
+
+    Each kind of trace has its own, so that no two traces of the same pixel
+    reuse random numbers.  ``BAND`` (``auto``'s full-width pilot rows)
+    shares the grid's, and ``REST`` (the rows a fallback full render adds
+    after the band) the edges', since they never trace the same pixels.
+    """
+
+    GRID = 0
+    BAND = 0
+    EDGES = 1
+    REST = 1
+    PILOT = 2
+    ID_PASS = 3
+    SLIVERS = 4
+
+
+class Tracer(Protocol):
+    """Traces more pixels for the modes that need them (``refine``, ``idpass``).
+
+    ``pixel_xy`` is (n, 2) of (column, row); with ``radiance`` the nested
+    integrator runs, with ``aovs`` the id AOVs (albedo, shape, lights) are
+    traced; what is not traced is zero.
+    """
+
+    def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
+                 aovs: bool = True, radiance: bool = True) -> "SparseTrace": ...
 
 
 def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
@@ -170,103 +277,3 @@ def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
     if bad.any():
         raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
                        f"{int(bad.sum())} of {bad.size} {where}")
-
-
-def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
-                      tracer=None) -> Reconstruction:
-    """The report's reconstruction (Algorithms 2 and 3), mode ``paper``.
-
-    Parameters
-    ----------
-    pattern : SamplePattern
-        The traced grid.
-    trace : SparseTrace
-        Radiance and AOVs of the traced pixels, rows outer, columns inner.
-    params : MRTParams
-    tracer : callable, optional
-        Unused: this mode traces nothing beyond the grid.
-    """
-    sample_ids = trace.ids(params.rule_for("paper"))
-    timings = {}
-    stats = Counter()
-    start = time.perf_counter()
-    if np.all(sample_ids == sample_ids[0]):
-        ids = np.full((pattern.height, pattern.width), sample_ids[0], dtype=np.int64)
-        stats["skipped_edge_finding"] += 1
-    else:
-        grid_ids = sample_ids.reshape(pattern.grid_shape)
-        ids = smooth_ids(quadtree_fill(pattern, grid_ids), params.filter_sigma,
-                         params.filter_cutoff, boxes=region_boxes(pattern, grid_ids))
-    timings["edges"] = time.perf_counter() - start
-
-    start = time.perf_counter()
-    # one albedo per id: radiance interpolates as albedo x irradiance would
-    modulated = not albedo_constant_per_id(sample_ids, safe_albedo(trace.albedo))
-    interp = interpolate_regions(
-        ids, pattern.pixel_xy, sample_ids,
-        demodulate(trace.radiance, trace.albedo) if modulated else trace.radiance,
-        max_inpoints=params.max_inpoints, num_cappoints=params.num_cappoints,
-        rbf_degree=params.rbf_degree)
-    if modulated:
-        albedo = region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo,
-                               nearest=pattern.nearest_image(np.arange(pattern.count)))
-        image = compose(interp.values, albedo, pattern.mask, trace.radiance)
-    else:
-        stats["skipped_albedo_division"] += 1
-        image = interp.values
-        pattern.put_traced(image, trace.radiance)
-    timings["interpolate"] = time.perf_counter() - start
-    stats.update(interp.counts)
-    # every id of the map was interpolated, filled as constant, or had no samples
-    stats["regions"] = sum(interp.counts[key] for key in ("rbf", "skipped_constant_ids",
-                                                          "no_samples"))
-    return Reconstruction(image, ids, pattern.mask, timings, stats)
-
-
-#: Reconstruction modes by name: ``fn(pattern, trace, params, tracer) -> Reconstruction``.
-MODES = {"paper": paper_reconstruct}
-
-
-def register_mode(name: str, function) -> None:
-    """Make a reconstruction function available as ``mode=name``."""
-    MODES[name] = function
-
-
-def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = MRTParams(),
-                mode: str = "paper", tracer=None) -> Reconstruction:
-    """Reconstruct the full image from the traced grid with one of :data:`MODES`.
-
-    Parameters
-    ----------
-    pattern : SamplePattern
-        The traced grid.
-    trace : SparseTrace
-        Radiance and AOVs of the traced pixels, rows outer, columns inner.
-    params : MRTParams
-    mode : str
-        A key of :data:`MODES` (``paper``, ``nearest``, ``bicubic``, ...).
-    tracer : callable, optional
-        ``tracer(pixel_xy, seed_offset=1, aovs=True, radiance=True) ->
-        SparseTrace`` traces more pixels (with the nested integrator when
-        ``radiance``, with the id AOVs when ``aovs``), for modes that refine.
-
-    Examples
-    --------
-    >>> from mitsuba_mrt.sampling import grid_pattern
-    >>> p = grid_pattern(8, 8, 0.25)
-    >>> t = SparseTrace(np.ones((p.count, 3)), np.full((p.count, 3), 0.5),
-    ...                 np.ones(p.count, int), np.ones(p.count, np.uint32), 1, 1, 0.0)
-    >>> out = reconstruct(p, t)
-    >>> float(out.image.min()), float(out.image.max())
-    (1.0, 1.0)
-    """
-    if mode not in MODES:
-        raise MRTError(f"unknown mode {mode!r}; choose one of {', '.join(MODES)}")
-    n = pattern.count
-    shapes = (trace.radiance.shape, trace.albedo.shape, trace.shape_index.shape,
-              trace.visible_lights.shape)
-    if shapes != ((n, 3), (n, 3), (n,), (n,)):
-        raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
-    check_radiance(trace.radiance)
-    with jit_workers_parked():  # none of Dr.Jit's workers busy-waits beside numpy
-        return MODES[mode](pattern, trace, params, tracer)

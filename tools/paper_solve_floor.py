@@ -7,7 +7,7 @@ the number of RBF centres of every region, times a Cholesky and an LU
 factorisation of a 2000 x 2000 system here (best of ``--repeats``), and sums
 the Cholesky time over the regions, scaled by (n / 2000)^3: no float64 direct
 solver of the report's systems can be faster than that on this machine.  The
-same sum for a float32 Cholesky is the floor of :mod:`mitsuba_mrt.rbf_solve`,
+same sum for a float32 Cholesky is the floor of :mod:`mitsuba_mrt.recon.rbf_solve`,
 which factors in float32 and refines in float64.
 """
 
@@ -18,9 +18,9 @@ import numpy as np
 import scipy.linalg
 
 import mitsuba_mrt
-from mitsuba_mrt.compose import demodulate
-from mitsuba_mrt.edges import quadtree_fill, smooth_ids
-from mitsuba_mrt.interpolate import interpolate_regions
+from mitsuba_mrt.recon.compose import demodulate
+from mitsuba_mrt.recon.edges import quadtree_fill, smooth_ids
+from mitsuba_mrt.recon.interpolate import interpolate_regions
 
 
 def best_of(repeats, function, *args):
@@ -59,7 +59,7 @@ def main():
     print(f"2000 x 2000 factorisation, best of {args.repeats}: Cholesky {cholesky * 1e3:.1f} ms, "
           f"LU {lu * 1e3:.1f} ms, float32 Cholesky {cholesky32 * 1e3:.1f} ms")
     print(f"summed over the regions: float32 Cholesky {floor32:.2f} s, Cholesky {floor:.2f} s "
-          f"(paper mode's reconstruction here: {result.timings['edges'] + result.timings['interpolate']:.2f} s)")
+          f"(paper mode's reconstruction here: {result.timings.edges + result.timings.interpolate:.2f} s)")
 
 
 if __name__ == "__main__":

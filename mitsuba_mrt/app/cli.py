@@ -1,4 +1,8 @@
-"""``python -m mitsuba_mrt``: argument parsing only; the work is in the library."""
+"""``python -m mitsuba_mrt``: argument parsing only; the work is in the library.
+
+The commands own their process, so they opt into the process tuning of
+:func:`mitsuba_mrt.runtime.configure` before any work.
+"""
 
 from __future__ import annotations
 
@@ -6,8 +10,8 @@ import argparse
 import json
 import sys
 
-from .errors import MRTError
-from .variants import VARIANT_CHOICES
+from ..errors import MRTError
+from ..renderer.variants import VARIANT_CHOICES
 
 
 class _Parser(argparse.ArgumentParser):
@@ -24,30 +28,35 @@ def _define(text: str) -> tuple[str, str]:
     return name.strip(), value
 
 
+#: The MRT parameters as options: (field of MRTParams, type, help).
+_PARAM_OPTIONS = (
+    ("sample_fraction", float, "fraction of pixels traced, in (0, 1]"),
+    ("filter_sigma", float, "sigma of the Gaussian id smoothing, pixels"),
+    ("filter_cutoff", float, "normalised cutoff of the id smoothing"),
+    ("max_inpoints", int, "most RBF centres per id"),
+    ("num_cappoints", int, "brightest and darkest capstones per id"),
+)
+
+
 def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
-    from .pipeline import MRTParams
+    from ..types import MRTParams
 
     d = MRTParams()
-    g = parser.add_argument_group("MRT parameters (the report's names)")
-    g.add_argument("--sample-fraction", type=float, default=d.sample_fraction,
-                   help="fraction of pixels traced, in (0, 1] (default %(default)s)")
-    g.add_argument("--filter-sigma", type=float, default=d.filter_sigma,
-                   help="sigma of the Gaussian id smoothing, pixels (default %(default)s)")
-    g.add_argument("--filter-cutoff", type=float, default=d.filter_cutoff,
-                   help="normalised cutoff of the id smoothing (default %(default)s)")
-    g.add_argument("--max-inpoints", type=int, default=d.max_inpoints,
-                   help="most RBF centres per id (default %(default)s)")
-    g.add_argument("--num-cappoints", type=int, default=d.num_cappoints,
-                   help="brightest and darkest capstones per id (default %(default)s)")
-    g.add_argument("--id-rule", choices=("auto", "paper", "exact"), default=d.id_rule,
+    g = parser.add_argument_group(
+        "MRT parameters (the report's names; default: the scene's mrt integrator's, "
+        "else the value shown)")
+    for name, kind, text in _PARAM_OPTIONS:
+        g.add_argument("--" + name.replace("_", "-"), type=kind, default=None,
+                       help=f"{text} ({getattr(d, name)})")
+    g.add_argument("--id-rule", choices=("auto", "paper", "exact"), default=None,
                    help="paper: shape + 0.5 per blocked light; exact: never collides; "
-                        "auto (default): paper in mode paper, exact elsewhere")
-    g.add_argument("--rbf-degree", type=int, choices=(-1, 0, 1), default=d.rbf_degree,
-                   help="polynomial added to the linear RBF; -1 is the report's")
+                        "auto: paper in mode paper, exact elsewhere (auto)")
+    g.add_argument("--rbf-degree", type=int, choices=(-1, 0, 1), default=None,
+                   help="polynomial added to the linear RBF; -1 is the report's (-1)")
 
 
 def _modes() -> list[str]:
-    from . import MODES
+    from ..modes import MODES
 
     return ["auto"] + list(MODES)
 
@@ -69,13 +78,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-reference", action="store_true",
                    help="skip the full reference render (no error, no PSNR)")
     r.add_argument("--json", action="store_true", help="print the JSON summary")
-    r.add_argument("--mode", default="auto", metavar="MODE",
+    r.add_argument("--mode", default=None, metavar="MODE",
                    help="reconstruction mode: " + ", ".join(_modes())
-                        + "; auto: fast when a measured pilot says it beats a full render, "
-                          "else the full render (default %(default)s)")
+                        + "; auto: refine or idpass when a measured pilot says it beats a "
+                          "full render, else the full render (default: the scene's mrt "
+                          "integrator's mode, else auto)")
     _add_mrt_options(r)
 
-    from .bench import EXPERIMENTS
+    from ..bench import EXPERIMENTS
 
     b = sub.add_parser("bench", help="the report's experiments: MRT against the full render "
                        "and the baselines (CSV, plots, markdown tables)")
@@ -102,37 +112,28 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _params(args):
-    from .pipeline import MRTParams
-
-    return MRTParams(sample_fraction=args.sample_fraction, filter_sigma=args.filter_sigma,
-                     filter_cutoff=args.filter_cutoff, max_inpoints=args.max_inpoints,
-                     num_cappoints=args.num_cappoints, id_rule=args.id_rule,
-                     rbf_degree=args.rbf_degree)
+def _param_overrides(args) -> dict:
+    """The MRT parameters given on the command line (None: not given)."""
+    names = [name for name, _, _ in _PARAM_OPTIONS] + ["id_rule", "rbf_degree"]
+    return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
 
 
 def _render(args) -> int:
     from .job import RenderJob, run_render_job, summary_line
 
-    if args.spp is not None and args.spp < 1:
-        raise MRTError(f"--spp must be >= 1, got {args.spp}")
-    if args.mode not in _modes():
-        raise MRTError(f"unknown mode {args.mode!r}; choose one of {', '.join(_modes())}")
     job = RenderJob(scene=args.scene, out_dir=args.output, defines=dict(args.defines),
-                    params=_params(args), spp=args.spp, seed=args.seed,
+                    param_overrides=_param_overrides(args), spp=args.spp, seed=args.seed,
                     variant=args.variant, reference=not args.no_reference, mode=args.mode)
     summary = run_render_job(job)
-    print(json.dumps(summary, indent=2) if args.json else summary_line(summary))
+    print(json.dumps(summary.as_dict(), indent=2) if args.json else summary_line(summary))
     return 0
 
 
 def _bench(args) -> int:
     import shlex
 
-    from .bench import run_experiment, summary_line
+    from ..bench import run_experiment, summary_line
 
-    if args.repeats is not None and args.repeats < 1:
-        raise MRTError(f"--repeats must be >= 1, got {args.repeats}")
     command = "python -m mitsuba_mrt " + shlex.join(args.argv)
     results = run_experiment(args.experiment, args.output, quick=args.quick,
                              repeats=args.repeats, variant=args.variant, methods=args.methods,
@@ -147,6 +148,9 @@ def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     args.argv = argv
+    from ..runtime import configure
+
+    configure()
     try:
         return {"render": _render, "bench": _bench}[args.command](args)
     except MRTError as exc:

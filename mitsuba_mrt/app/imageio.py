@@ -1,7 +1,8 @@
 """Writing results: multi-channel EXR (OpenEXR), PNG and JSON, all atomically.
 
 Every writer writes to a temporary file in the target folder and renames it
-into place, so a failure never leaves a half-written output.
+into place, so a failure never leaves a half-written output; an
+:class:`OutputSet` does the same for several files together.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import MRTError
+from ..errors import MRTError
 
 
 @contextmanager
@@ -90,13 +91,27 @@ def write_png(path: str | os.PathLike, rgb_linear: np.ndarray) -> None:
 
 
 def write_error_png(path: str | os.PathLike, errors: np.ndarray,
-                    floor: float = 1e-4, cmap: str = "inferno") -> None:
-    """Write an error map with a log colour scale from ``floor`` to 1."""
-    from matplotlib.image import imsave
+                    floor: float = 1e-4, cmap: str = "inferno",
+                    label: str = "per-pixel error") -> None:
+    """Write an error map, log colour scale from ``floor`` to 1, with a colour bar."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import LogNorm
+    from matplotlib.figure import Figure
 
-    logs = np.log10(np.clip(np.asarray(errors, dtype=np.float64), floor, 1.0))
+    errors = np.clip(np.nan_to_num(np.asarray(errors, dtype=np.float64)), floor, 1.0)
+    height, width = errors.shape
+    dpi = 100
+    fig = Figure(figsize=((width + 110) / dpi, max(height, 160) / dpi), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes([0.0, 0.0, width / (width + 110), 1.0])
+    shown = ax.imshow(errors, cmap=cmap, norm=LogNorm(vmin=floor, vmax=1.0),
+                      interpolation="nearest")
+    ax.set_axis_off()
+    bar = fig.add_axes([width / (width + 110) + 0.02, 0.08, 12 / (width + 110), 0.84])
+    fig.colorbar(shown, cax=bar).set_label(label, fontsize=8)
+    bar.tick_params(labelsize=7)
     with atomic_path(path) as tmp:
-        imsave(tmp, logs, vmin=np.log10(floor), vmax=0.0, cmap=cmap, format="png")
+        fig.savefig(tmp, format="png", dpi=dpi)
 
 
 def write_json(path: str | os.PathLike, obj) -> None:
@@ -104,3 +119,71 @@ def write_json(path: str | os.PathLike, obj) -> None:
     text = json.dumps(obj, indent=2, sort_keys=False, allow_nan=True)
     with atomic_path(path) as tmp:
         Path(tmp).write_text(text + "\n")
+
+
+class OutputSet:
+    """Several output files that appear together or not at all.
+
+    Each writer is given :meth:`path` (a temporary file beside the final
+    one); when the ``with`` block ends without an error every file is
+    renamed into place, in the order asked for; after an error (or Ctrl-C)
+    every temporary file is removed and no final file is touched.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> folder = Path(tempfile.mkdtemp())
+    >>> with OutputSet(folder) as out:
+    ...     _ = Path(out.path("a.txt")).write_text("a")
+    >>> sorted(p.name for p in folder.iterdir())
+    ['a.txt']
+    """
+
+    def __init__(self, folder: str | os.PathLike):
+        self.folder = Path(folder)
+        self._files: list[tuple[str, str]] = []  # (temporary, final name)
+
+    def __enter__(self) -> "OutputSet":
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise MRTError(f"cannot create output folder {self.folder}: "
+                           f"{exc.strerror or exc}") from None
+        return self
+
+    def path(self, name: str) -> str:
+        """A temporary path for the output file ``name``."""
+        stem, suffix = os.path.splitext(name)
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=suffix, dir=self.folder)
+        except OSError as exc:
+            raise MRTError(f"cannot write into {self.folder}: {exc.strerror or exc}") from None
+        os.close(fd)
+        self._files.append((tmp, name))
+        return tmp
+
+    @property
+    def names(self) -> list[str]:
+        """The final names, in order."""
+        return [name for _, name in self._files]
+
+    def __exit__(self, kind, error, trace) -> None:
+        if kind is None:
+            umask = os.umask(0)
+            os.umask(umask)
+            try:
+                for tmp, name in self._files:
+                    os.chmod(tmp, 0o666 & ~umask)
+                for tmp, name in self._files:
+                    os.replace(tmp, self.folder / name)
+                return
+            except OSError as exc:
+                error = MRTError(f"cannot write into {self.folder}: {exc.strerror or exc}")
+        for tmp, _ in self._files:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        if isinstance(error, OSError):
+            errno_text = error.strerror or str(error)
+            raise MRTError(f"cannot write into {self.folder}: {errno_text}") from None
+        if kind is None:
+            raise error

@@ -6,113 +6,168 @@ The command line only parses arguments and calls :func:`run_render_job`.
 from __future__ import annotations
 
 import os
-import platform
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .errors import MRTError
-from .imageio import write_error_png, write_exr, write_json, write_png
-from .metrics import error_map, paper_error, psnr
-from .pipeline import MRTParams
+from ..recon.metrics import error_map, paper_error, psnr
+from ..types import MRTParams, Skips, Timings, TracedCounts
+from .imageio import OutputSet, write_error_png, write_exr, write_json, write_png
 
 
 @dataclass
 class RenderJob:
-    """What to render and where to write it."""
+    """What to render and where to write it.
+
+    ``params`` and ``mode`` left as None take the scene's ``mrt`` integrator's
+    (if it has one), else the defaults; ``param_overrides`` (fields of
+    :class:`MRTParams`) are applied on top.
+    """
 
     scene: str
     out_dir: str = "out"
     defines: dict = field(default_factory=dict)
-    params: MRTParams = field(default_factory=MRTParams)
+    params: MRTParams | None = None
+    param_overrides: dict = field(default_factory=dict)
     spp: int | None = None
     seed: int = 0
     variant: str = "auto"
     reference: bool = True
-    mode: str = "auto"
+    mode: str | None = None
 
 
-def _environment(variant: str) -> dict:
-    import drjit as dr
-    import mitsuba as mi
+@dataclass
+class RunSummary:
+    """What a render job did, as written to ``<stem>.json``.
 
-    return {"variant": variant, "mitsuba": mi.__version__, "drjit": dr.__version__,
-            "cpu_count": os.cpu_count(), "machine": platform.machine(),
-            "python": platform.python_version()}
+    ``reference_time_s``, ``relative_time``, ``error`` and ``psnr_db`` are
+    None without a reference; when the MRT rendered in full (``auto`` chose
+    it), the image is the full render: there is no second reference, the
+    time is its own and the error None.
+    """
+
+    scene: str
+    variant: str
+    width: int
+    height: int
+    spp: int
+    mode: str
+    mode_used: str
+    why: str
+    sample_fraction: float
+    traced: TracedCounts
+    timings: Timings
+    skipped: Skips
+    auto: dict | None
+    reference_time_s: float | None
+    relative_time: float | None
+    error: float | None
+    psnr_db: float | None
+    params: dict
+    defines: dict
+    seed: int
+    stats: dict
+    environment: dict
+    outputs: list = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
 
 
-def run_render_job(job: RenderJob) -> dict:
+def _why(result) -> str:
+    """Why the mode that ran was chosen, in a few words."""
+    decision = result.auto
+    if decision is None:
+        return "asked for"
+    if decision.reason == "pilot":
+        ratio = decision.predicted_mrt_s / decision.predicted_full_s
+        return f"auto: the pilot predicted {ratio:.2f} of a full render"
+    return {"small": "auto: too few samples for the MRT to pay off",
+            "scalar": "auto: the scalar variant renders in full"}.get(decision.reason,
+                                                                     decision.reason)
+
+
+def run_render_job(job: RenderJob) -> RunSummary:
     """Render ``job.scene`` with the MRT (and the reference), write outputs.
 
-    Files written into ``job.out_dir`` (each atomically), with ``stem`` the
-    scene file's name: ``stem_mrt.exr`` (R, G, B, id, shape_index,
-    visible_lights, traced), ``stem_mrt.png``, and with the reference
-    ``stem_ref.exr``, ``stem_ref.png``, ``stem_error.png``; last
+    Files written into ``job.out_dir``, together or not at all, with
+    ``stem`` the scene file's name: ``stem_mrt.exr`` (R, G, B, id,
+    shape_index, visible_lights, traced), ``stem_mrt.png``, and with the
+    reference ``stem_ref.exr``, ``stem_ref.png``, ``stem_error.png``; last
     ``stem.json``, the returned summary.
     """
-    from .variants import activate
+    from ..renderer.api import render, render_reference
+    from ..renderer.aovs import aov_images
+    from ..renderer.scene import load_scene
+    from ..renderer.variants import activate, environment
 
-    if not os.path.isfile(job.scene):
-        raise MRTError(f"scene file not found: {job.scene}")
     variant = activate(job.variant)
-    from .api import load_scene, render, render_reference
-    from .plugins import aov_images
-
     scene = load_scene(job.scene, **job.defines)
-    result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode)
-    out = Path(job.out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise MRTError(f"cannot create output folder {out}: {exc.strerror}") from None
+    result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode,
+                    **job.param_overrides)
     stem = Path(job.scene).stem
     height, width = result.ids.shape
-    summary = {
-        "scene": os.fspath(job.scene), "variant": variant, "width": width,
-        "height": height, "spp": result.spp, "mode": result.mode,
-        "mode_used": result.stats.get("mode_used", result.mode),
-        "skipped": {k[len("skipped_"):]: v for k, v in result.stats.items()
-                    if k.startswith("skipped_")},
-        "sample_fraction": result.params.sample_fraction,
-        "traced_pixels": int(result.traced_mask.sum()),
-        "timings": {k: result.timings[k] for k in ("trace", "edges", "interpolate", "total")},
-        "reference_time_s": None, "relative_time": None, "error": None, "psnr_db": None,
-        "params": result.params.as_dict(), "defines": dict(job.defines), "seed": job.seed,
-        "stats": {k: v for k, v in result.stats.items() if not k.startswith("skipped_")}, "environment": _environment(variant), "outputs": [],
-    }
-    files = summary["outputs"]
+    full = result.mode_used == "full"
+    reference = None
+    if job.reference and not full:
+        reference, seconds = render_reference(scene, spp=result.spp, seed=job.seed)
+    summary = RunSummary(
+        scene=os.fspath(job.scene), variant=variant, width=width, height=height,
+        spp=result.spp, mode=result.mode, mode_used=result.mode_used, why=_why(result),
+        sample_fraction=result.params.sample_fraction, traced=result.traced,
+        timings=result.timings, skipped=result.skips,
+        auto=asdict(result.auto) if result.auto else None,
+        reference_time_s=(result.timings.full_render if full else
+                          seconds if reference is not None else None),
+        relative_time=None, error=None, psnr_db=None,
+        params=result.params.as_dict(), defines=dict(job.defines), seed=job.seed,
+        stats=dict(result.stats), environment=environment(variant))
+    if full:
+        summary.relative_time = result.timings.total / result.timings.full_render
+    elif reference is not None:
+        summary.relative_time = result.timings.total / seconds
+        summary.error = paper_error(result.image, reference)
+        summary.psnr_db = psnr(result.image, reference)
+
     channels = {"R": result.image[..., 0], "G": result.image[..., 1], "B": result.image[..., 2]}
     for name, image in aov_images(result).items():
         channels[name] = image.astype(np.uint32) if name != "id" else image
-    write_exr(out / f"{stem}_mrt.exr", channels)
-    write_png(out / f"{stem}_mrt.png", result.image)
-    files += [f"{stem}_mrt.exr", f"{stem}_mrt.png"]
-    if job.reference:
-        reference, seconds = render_reference(scene, spp=result.spp, seed=job.seed)
-        summary.update(reference_time_s=seconds,
-                       relative_time=result.timings["total"] / seconds,
-                       error=paper_error(result.image, reference),
-                       psnr_db=psnr(result.image, reference))
-        write_exr(out / f"{stem}_ref.exr", {c: reference[..., k] for k, c in enumerate("RGB")})
-        write_png(out / f"{stem}_ref.png", reference)
-        write_error_png(out / f"{stem}_error.png", error_map(result.image, reference))
-        files += [f"{stem}_ref.exr", f"{stem}_ref.png", f"{stem}_error.png"]
-    files.append(f"{stem}.json")
-    write_json(out / f"{stem}.json", summary)
+    with OutputSet(job.out_dir) as out:
+        write_exr(out.path(f"{stem}_mrt.exr"), channels)
+        write_png(out.path(f"{stem}_mrt.png"), result.image)
+        if reference is not None:
+            write_exr(out.path(f"{stem}_ref.exr"),
+                      {c: reference[..., k] for k, c in enumerate("RGB")})
+            write_png(out.path(f"{stem}_ref.png"), reference)
+            write_error_png(out.path(f"{stem}_error.png"), error_map(result.image, reference))
+        json_path = out.path(f"{stem}.json")
+        summary.outputs = out.names
+        write_json(json_path, summary.as_dict())
     return summary
 
 
-def summary_line(summary: dict) -> str:
-    """One terminal line describing a render job's summary."""
-    t = summary["timings"]
-    line = (f"{Path(summary['scene']).stem}: {summary['width']}x{summary['height']}, "
-            f"{summary['traced_pixels']} pixels traced "
-            f"({100.0 * summary['traced_pixels'] / (summary['width'] * summary['height']):.1f}%), "
-            f"MRT {t['total']:.3f} s (trace {t['trace']:.3f}, edges {t['edges']:.3f}, "
-            f"interpolate {t['interpolate']:.3f})")
-    if summary["reference_time_s"] is not None:
-        line += (f", reference {summary['reference_time_s']:.3f} s, "
-                 f"error {summary['error']:.5f}, PSNR {summary['psnr_db']:.2f} dB")
-    used = summary["mode_used"]
-    return line + f" [{summary['variant']}, mode {used}]"
+def summary_line(summary: RunSummary) -> str:
+    """One terminal line: what was traced and why, where the time went, the error."""
+    s, t, traced = summary, summary.timings, summary.traced
+    pixels = s.width * s.height
+    parts = [f"{n} {label}" for n, label in ((traced.grid, "grid"), (traced.band, "pilot band"),
+                                             (traced.more, _more_label(s.mode_used)),
+                                             (traced.full, "full render")) if n]
+    line = (f"{Path(s.scene).stem}: {s.width}x{s.height}, mode {s.mode_used} ({s.why}); "
+            f"traced {' + '.join(parts) or 'nothing'} = "
+            f"{100.0 * traced.total / pixels:.1f}% of the pixels; "
+            f"{t.total:.3f} s = trace {t.trace:.3f} + more {t.trace_more:.3f}"
+            f" + edges {t.edges:.3f} + interpolate {t.interpolate:.3f}"
+            f"{f' + full render {t.full_render:.3f}' if t.full_render else ''}"
+            f" + other {t.other:.3f}")
+    if s.error is not None:
+        line += (f"; reference {s.reference_time_s:.3f} s ({s.relative_time:.2f}x), "
+                 f"error {s.error:.5f}, PSNR {s.psnr_db:.2f} dB")
+    elif s.mode_used == "full":
+        line += "; the image is the full render (no second reference)"
+    return line + f" [{s.variant}]"
+
+
+def _more_label(mode_used: str) -> str:
+    return {"refine": "at edges", "idpass": "in thin regions"}.get(mode_used, "more")

@@ -15,7 +15,7 @@ median of its totals (and the stage times of that same run).
 
 Methods, by name: ``full`` (the plain Mitsuba render with the same
 integrator and spp, the reference: relative time 1), ``mrt-<mode>`` for each
-reconstruction mode of :data:`mitsuba_mrt.pipeline.MODES` at run time, except
+reconstruction mode of :data:`mitsuba_mrt.modes.MODES` at run time, except
 the scene-agnostic baselines, which keep their names (``nearest``,
 ``bicubic``). All of them trace the same grid with the same seed.
 
@@ -44,13 +44,13 @@ import sys
 import time
 import tracemalloc
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .errors import MRTError
-from .imageio import atomic_path, srgb_encode
+from ..app.imageio import atomic_path, srgb_encode
+from ..errors import MRTError
 
 #: The experiments, in the order ``all`` runs them.
 EXPERIMENTS = ("fraction", "filter", "pixels", "objects", "lights", "tradeoff")
@@ -107,7 +107,7 @@ AUTO = "mrt-auto"
 
 def available_methods() -> dict[str, str | None]:
     """Every method name now available -> its mode (``None`` for ``full``)."""
-    from .pipeline import MODES
+    from ..modes import MODES
 
     return {FULL: None, **{method_name(m): m for m in MODES}, AUTO: "auto"}
 
@@ -257,26 +257,6 @@ def build_experiment(name: str, quick: bool = False, res: int | None = None) -> 
 
 # --------------------------------------------------------------------------- measuring
 
-def environment(variant: str) -> dict:
-    """Variant, versions and machine, written into every row."""
-    from .job import _environment
-
-    env = _environment(variant)
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return {"variant": env["variant"], "mitsuba": env["mitsuba"], "drjit": env["drjit"],
-            "cpu_count": env["cpu_count"], "cpu_model": cpu or "unknown",
-            "machine": env["machine"], "platform": platform.platform(terse=True),
-            "python": env["python"]}
-
-
 def _proc_status_kb(field_name: str) -> int:
     with open("/proc/self/status") as f:
         for line in f:
@@ -364,13 +344,13 @@ def _failure(exc: BaseException) -> str:
 
 
 def _paper_error(image, reference):
-    from .metrics import paper_error
+    from ..recon.metrics import paper_error
 
     return paper_error(image, reference)
 
 
 def _psnr(image, reference):
-    from .metrics import psnr
+    from ..recon.metrics import psnr
 
     return psnr(image, reference)
 
@@ -388,7 +368,7 @@ class _PointRunner:
 
     # one call, timed and metered
     def _full(self, scene, spp, seed=0):
-        from .api import render_reference
+        from ..renderer.api import render_reference
 
         with self.meter.measure() as mem:
             image, seconds = render_reference(scene, spp=spp, seed=seed)
@@ -396,14 +376,14 @@ class _PointRunner:
                                 "total": seconds}, mem
 
     def _mrt(self, scene, mode, setting):
-        from .api import render
+        from ..renderer.api import render
 
         with self.meter.measure() as mem:
             result = render(scene, spp=self.point.spp, seed=0, mode=mode, **setting.params)
         return result, mem
 
     def run(self, keep_images_for: int | None):
-        from .api import load_scene
+        from ..renderer.scene import load_scene
 
         point = self.point
         path = self.scenes_dir / point.scene
@@ -422,7 +402,7 @@ class _PointRunner:
         for (s, m), r in runs.items():
             try:
                 result, _ = self._mrt(scene, modes[m], point.settings[s])
-                r.warmup = result.timings["total"]
+                r.warmup = result.timings.total
             except Exception as exc:  # noqa: BLE001 - a broken mode must not end the sweep
                 failed[(s, m)] = _failure(exc)
             self.tick()
@@ -452,7 +432,7 @@ class _PointRunner:
                     failed[(s, m)] = _failure(exc)
                     tick()
                     continue
-                r.totals.append(result.timings["total"]), r.stages.append(dict(result.timings))
+                r.totals.append(result.timings.total), r.stages.append(asdict(result.timings))
                 r.peaks.append(mem["peak_mb"]), r.deltas.append(mem["delta_mb"])
                 r.traced, r.spp = int(result.traced_mask.sum()), int(result.spp)
                 r.image = result.image
@@ -767,7 +747,7 @@ def plot_tradeoff(rows, path, experiment: Experiment) -> None:
 
 def plot_triptych(path, reference, image, title: str, reference_title="reference") -> None:
     """Reference | MRT | error map (log10 of the report's per-pixel error)."""
-    from .metrics import error_map
+    from ..recon.metrics import error_map
 
     fig = _figure(9.0, 3.3)
     axes = fig.subplots(1, 3)
@@ -935,7 +915,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     if int(repeats) != repeats or repeats < 1:
         raise MRTError(f"--repeats must be an integer >= 1, got {repeats}")
     experiment = build_experiment(name, quick=quick, res=res)
-    from .variants import activate
+    from ..renderer.variants import activate, environment
 
     variant = activate(variant)
     method_list = resolve_methods(methods)

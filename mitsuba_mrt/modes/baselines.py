@@ -1,9 +1,7 @@
-"""Scene-agnostic upsampling of the traced grid: what the MRT must beat.
+"""Modes ``nearest`` and ``bicubic``: scene-agnostic upsampling, what the MRT must beat.
 
-Both baselines see the same traced colours as the MRT and nothing else
-(no ids, no albedo): ``nearest`` copies the nearest traced pixel, ``bicubic``
-fits an interpolating bicubic spline through the grid (a tensor grid, so
-``scipy.interpolate.RectBivariateSpline`` applies, one channel at a time).
+Both see the same traced colours as the MRT and nothing else (no ids, no
+albedo); the upsampling is :mod:`mitsuba_mrt.recon.upsample`.
 """
 
 from __future__ import annotations
@@ -12,65 +10,27 @@ import time
 from collections import Counter
 
 import numpy as np
-from scipy.interpolate import RectBivariateSpline
 
-from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
-from .sampling import SamplePattern
-
-
-def upsample_nearest(pattern: SamplePattern, values: np.ndarray) -> np.ndarray:
-    """Nearest-neighbour upsampling of per-sample ``values`` (n, channels).
-
-    Examples
-    --------
-    >>> from mitsuba_mrt.sampling import SamplePattern
-    >>> p = SamplePattern(4, 1, np.array([0]), np.array([0, 3]))
-    >>> upsample_nearest(p, np.array([[1.0], [2.0]]))[0, :, 0]
-    array([1., 1., 2., 2.])
-    """
-    return pattern.nearest_image(values)
-
-
-def upsample_spline(pattern: SamplePattern, values: np.ndarray, degree: int = 3) -> np.ndarray:
-    """Interpolating spline upsampling (bicubic for ``degree=3``).
-
-    The degree drops where the grid has too few rows or columns.
-
-    Examples
-    --------
-    >>> from mitsuba_mrt.sampling import grid_pattern
-    >>> p = grid_pattern(20, 20, 0.2)
-    >>> plane = (p.pixel_xy[:, :1] + 2.0 * p.pixel_xy[:, 1:]).astype(float)
-    >>> bool(np.allclose(upsample_spline(p, plane)[7, 5, 0], 5 + 2 * 7))
-    True
-    """
-    values = np.asarray(values, dtype=np.float64)
-    nr, nc = pattern.grid_shape
-    grid = values.reshape(nr, nc, -1)
-    if nr == 1 or nc == 1:
-        return upsample_nearest(pattern, values)
-    ky, kx = min(degree, nr - 1), min(degree, nc - 1)
-    out = np.empty((pattern.height, pattern.width, grid.shape[2]))
-    rows, cols = np.arange(pattern.height), np.arange(pattern.width)
-    for c in range(grid.shape[2]):
-        spline = RectBivariateSpline(pattern.rows, pattern.cols, grid[..., c], kx=ky, ky=kx, s=0)
-        out[..., c] = spline(rows, cols, grid=True)
-    return out
+from ..recon.sampling import SamplePattern
+from ..recon.upsample import upsample_nearest, upsample_spline
+from ..types import MRTParams, Reconstruction, SparseTrace, Timings, Tracer
 
 
 def _baseline(upsample):
+    """A mode that upsamples the traced radiance with ``upsample(pattern, values)``."""
+
     def mode(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
-             tracer=None) -> Reconstruction:
+             tracer: Tracer | None = None) -> Reconstruction:
         start = time.perf_counter()
         image = upsample(pattern, trace.radiance)
         image[pattern.mask] = trace.radiance
         seconds = time.perf_counter() - start
         sample_ids = trace.ids(params.rule_for("nearest"))
         ids = pattern.nearest_image(sample_ids)
-        return Reconstruction(image, ids, pattern.mask, {"edges": 0.0, "interpolate": seconds},
-                              Counter(regions=int(len(np.unique(ids)))))
+        return Reconstruction(image, ids, pattern.mask, Timings(interpolate=seconds),
+                              stats=Counter(regions=int(len(np.unique(ids)))))
     return mode
 
 
-register_mode("nearest", _baseline(upsample_nearest))
-register_mode("bicubic", _baseline(upsample_spline))
+nearest_reconstruct = _baseline(upsample_nearest)
+bicubic_reconstruct = _baseline(upsample_spline)

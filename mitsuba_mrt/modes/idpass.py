@@ -17,11 +17,11 @@ from collections import Counter
 
 import numpy as np
 
-from .compose import safe_albedo
-from .errors import MRTError
-from .fast import black_background, cell_coordinates, interpolate_within_ids
-from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, register_mode
-from .sampling import SamplePattern
+from ..recon.compose import safe_albedo
+from ..recon.sampling import SamplePattern
+from ..recon.within_region import black_background, cell_coordinates, interpolate_within_ids
+from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
+                     check_radiance)
 
 
 def unsupported_pixels(pattern: SamplePattern, grid_ids: np.ndarray,
@@ -30,7 +30,7 @@ def unsupported_pixels(pattern: SamplePattern, grid_ids: np.ndarray,
 
     Examples
     --------
-    >>> from mitsuba_mrt.sampling import grid_pattern
+    >>> from mitsuba_mrt.recon.sampling import grid_pattern
     >>> p = grid_pattern(20, 20, 0.2)
     >>> ids = np.zeros((20, 20), dtype=int); ids[9, 9] = 5   # a one-pixel sliver
     >>> int(unsupported_pixels(p, np.zeros(p.grid_shape, int), ids).sum())
@@ -49,29 +49,28 @@ def unsupported_pixels(pattern: SamplePattern, grid_ids: np.ndarray,
 
 
 def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
-                       tracer=None) -> Reconstruction:
+                       tracer: Tracer | None = None) -> Reconstruction:
     """Exact ids and albedo at every pixel, radiance on the grid (mode ``idpass``)."""
-    if tracer is None:
-        raise MRTError("mode 'idpass' needs a tracer for its id pass")
     rule = params.rule_for("idpass")
     stats = Counter()
     height, width = pattern.height, pattern.width
     start = time.perf_counter()
     every = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
-    aov = tracer(every, 3, True, False)
+    aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False)
     id_map = aov.ids(rule).reshape(height, width)
     albedo = safe_albedo(aov.albedo).reshape(height, width, 3)
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     missing = unsupported_pixels(pattern, grid_ids, id_map)
     missing[np.ix_(pattern.rows, pattern.cols)] = False
     extra_xy = np.argwhere(missing)[:, ::-1]
-    extra = tracer(extra_xy, 4, False, True) if len(extra_xy) else None
+    extra = tracer(extra_xy, stream=SeedStream.SLIVERS, aovs=False) if len(extra_xy) else None
     id_pass_s = aov.seconds
     edges_s = time.perf_counter() - start - id_pass_s - (extra.seconds if extra else 0.0)
 
     start = time.perf_counter()
     irradiance = trace.radiance / safe_albedo(trace.albedo)
     constant = black_background(grid_ids.ravel(), trace.radiance, stats)
+    skips = Skips(background=stats.pop("background", 0))
     interp, edge_pixels = interpolate_within_ids(
         pattern, grid_ids, irradiance.astype(np.float32).reshape(pattern.grid_shape + (3,)),
         id_map, constant)
@@ -85,10 +84,7 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     stats["regions"] = int(len(np.unique(id_map)))
     stats["edge_pixels"] = int(edge_pixels)
     stats["sliver_pixels"] = int(len(extra_xy))
-    return Reconstruction(image, id_map, traced_mask,
-                          {"edges": edges_s, "interpolate": time.perf_counter() - start,
-                           "id_pass": id_pass_s,
-                           "sliver_trace": extra.seconds if extra else 0.0}, stats)
+    timings = Timings(trace_more=id_pass_s + (extra.seconds if extra else 0.0), edges=edges_s,
+                      interpolate=time.perf_counter() - start)
+    return Reconstruction(image, id_map, traced_mask, timings, skips, stats)
 
-
-register_mode("idpass", idpass_reconstruct)

@@ -10,7 +10,7 @@ ends up with its traced id (up to features thinner than the sub-cells).
 Cells with a corner on a curved mirror are split down to pixels whatever
 their ids: such a mirror minifies what it reflects, so its reflected
 regions are often thinner than the cells and invisible to their corners.
-Values then come from :func:`mitsuba_mrt.fast.interpolate_traced_grid` with
+Values then come from :func:`mitsuba_mrt.recon.within_region.interpolate_traced_grid` with
 the refined ids (demodulated by albedo where it varies, as in ``fast``), and
 every traced pixel keeps its traced radiance.
 """
@@ -23,10 +23,11 @@ from collections import Counter
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .fast import interpolate_traced_grid
-from .errors import MRTError
-from .pipeline import MRTParams, Reconstruction, SparseTrace, check_radiance, register_mode
-from .sampling import SamplePattern
+from ..recon.sampling import SamplePattern
+from ..recon.within_region import interpolate_traced_grid
+from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
+                     check_radiance)
+from .fast import skips_from
 
 
 def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids,
@@ -127,10 +128,8 @@ def _fill_agreeing(ids, r0, r1, c0, c1, value):
 
 
 def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
-                       tracer=None) -> Reconstruction:
+                       tracer: Tracer | None = None) -> Reconstruction:
     """Grid trace + adaptive edge refinement + within-id interpolation (mode ``refine``)."""
-    if tracer is None:
-        raise MRTError("mode 'refine' needs a tracer to trace edge pixels")
     rule = params.rule_for("refine")
     stats = Counter()
     start = time.perf_counter()
@@ -142,7 +141,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
         stats["curved_mirror_samples"] = int(curved.sum())
 
     def trace_ids(points):
-        more = tracer(points)
+        more = tracer(points, stream=SeedStream.EDGES)
         extra.append((points, more))
         if curved is None:
             return more.ids(rule)
@@ -155,7 +154,9 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     edges_s = time.perf_counter() - start - trace_s
 
     start = time.perf_counter()
-    image = interpolate_traced_grid(pattern, trace, grid_ids.ravel(), id_map, stats)
+    image, counts = interpolate_traced_grid(pattern, trace.radiance, trace.albedo,
+                                            grid_ids.ravel(), id_map)
+    stats["edge_pixels"] = counts["edge_pixels"]
     traced_mask = pattern.mask.copy()
     if extra:
         xy = np.concatenate([p for p, _ in extra])
@@ -168,9 +169,9 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     stats["regions"] = int(len(np.unique(id_map)))
     stats["refined_pixels"] = int(traced_mask.sum() - pattern.count)
     stats["refined_fraction"] = float(stats["refined_pixels"] / id_map.size)
-    return Reconstruction(image, id_map, traced_mask,
-                          {"edges": edges_s, "interpolate": time.perf_counter() - start,
-                           "refine_trace": trace_s}, stats)
+    timings = Timings(trace_more=trace_s, edges=edges_s,
+                      interpolate=time.perf_counter() - start)
+    return Reconstruction(image, id_map, traced_mask, timings, skips_from(counts), stats)
 
 
 def _fix_orphans(image, id_map, traced_mask, grid_ids, pattern, xy, ids, radiance):
@@ -186,5 +187,3 @@ def _fix_orphans(image, id_map, traced_mask, grid_ids, pattern, xy, ids, radianc
             _, k = cKDTree(xy[members][:, ::-1]).query(pixels)
             image[pixels[:, 0], pixels[:, 1]] = radiance[members][k]
 
-
-register_mode("refine", refine_reconstruct)

@@ -1,7 +1,7 @@
 """Stage 3: the report's edge finder (quadtree id fill + Gaussian smoothing).
 
 Both functions work on plain numpy arrays.  The traced pixels form the
-tensor grid of a :class:`~mitsuba_mrt.sampling.SamplePattern`, so the known
+tensor grid of a :class:`~mitsuba_mrt.recon.sampling.SamplePattern`, so the known
 pixels inside any rectangle are a sub-block of the grid, found by two
 ``searchsorted`` calls, and the known pixel nearest to a point is found one
 axis at a time (Euclidean distance on a tensor grid is separable), from the
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from .errors import MRTError
+from ..errors import MRTError
 from .sampling import SamplePattern
-from .threads import for_row_blocks
+from ..runtime.threads import for_row_blocks
 
 
 def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
@@ -51,7 +51,7 @@ def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
 
     Examples
     --------
-    >>> from mitsuba_mrt.sampling import SamplePattern
+    >>> from mitsuba_mrt.recon.sampling import SamplePattern
     >>> p = SamplePattern(4, 4, np.array([0, 3]), np.array([0, 3]))
     >>> int(quadtree_fill(p, np.array([[1, 1], [1, 1]]))[2, 1])
     1

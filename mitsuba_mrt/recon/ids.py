@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import MRTError
+from ..errors import MRTError
 
 ID_RULES = ("paper", "exact")
 

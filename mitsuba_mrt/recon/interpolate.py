@@ -1,7 +1,7 @@
 """Stage 4: per-region interpolation (the report's Algorithm 3).
 
 Every id region is interpolated only from known samples of the same id, by
-a linear RBF (:class:`mitsuba_mrt.rbf.LinearRBF`) through "capstone"
+a linear RBF (:class:`mitsuba_mrt.recon.rbf.LinearRBF`) through "capstone"
 samples (convex-hull vertices, the brightest, the darkest) plus evenly
 spaced secondary samples, at most ``max_inpoints`` centres in all.
 """
@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from .compose import query_workers
-from .errors import MRTError
+from ..errors import MRTError
 from .ids import run_starts
 from .rbf import LinearRBF
 
@@ -32,9 +32,9 @@ class InterpolationResult:
     values : ndarray, shape (height, width, channels)
         Interpolated values at every pixel (known pixels included).
     counts : Counter
-        How each region was handled: ``rbf``; ``skipped_constant_ids`` (all
+        How each region was handled: ``rbf``; ``constant`` (all
         samples equal, or one sample: filled, not interpolated), of which
-        ``skipped_background`` (the background, id 0); ``no_samples`` (an
+        ``background`` (the background, id 0); ``no_samples`` (an
         id that no sample carries, filled from the nearest sample of any id).
     centres : dict
         Number of RBF centres used per id.
@@ -166,9 +166,9 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
         values = sample_values[members]
         if len(members) == 1 or _is_constant(values):
             out[pixels] = values.mean(axis=0)
-            result.counts["skipped_constant_ids"] += 1
+            result.counts["constant"] += 1
             if region == 0:
-                result.counts["skipped_background"] += 1
+                result.counts["background"] += 1
             continue
         xy = sample_xy[members].astype(np.float64)
         chosen = select_centres(xy, values.mean(axis=1), max_inpoints, num_cappoints)

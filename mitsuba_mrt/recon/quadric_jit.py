@@ -1,12 +1,12 @@
 """The fast mode's near-edge fits as one Dr.Jit LLVM kernel.
 
-:func:`mitsuba_mrt.fast.quadric_coefficients` fits a weighted quadric per
+:func:`mitsuba_mrt.recon.within_region.quadric_coefficients` fits a weighted quadric per
 (grid cell, id) group as batched numpy solves; most of its time goes to small
 matrix products and temporaries.  This module computes the same fits in a
 single vectorised kernel on Dr.Jit's LLVM backend (all cores, no
 temporaries): the 4 x 4 block's moments, the ridge and a 6 x 6 Cholesky
 solve per group, then a second kernel evaluates the fits at the pixels.  It is used only where Dr.Jit's LLVM backend is safe to
-start (:func:`mitsuba_mrt.variants.llvm_usable`); elsewhere the numpy fit
+start (:func:`mitsuba_mrt.runtime.jit.llvm_usable`); elsewhere the numpy fit
 runs, and the tests hold the two together.
 """
 
@@ -16,7 +16,7 @@ import functools
 
 import numpy as np
 
-from .threads import jit_workers
+from ..runtime.jit import jit_workers
 
 #: Basis of the quadric, as powers (of x, of y) of the offsets from the cell's centre.
 _POWERS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
@@ -41,7 +41,7 @@ def _aligned(array_type, values: np.ndarray, dtype):
 @functools.cache
 def available() -> bool:
     """True when the LLVM backend can run here (libLLVM >= 17 loaded)."""
-    from .variants import llvm_usable
+    from ..runtime.jit import llvm_usable
 
     return llvm_usable()
 
@@ -54,7 +54,7 @@ def quadric_values_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
     """Weighted quadric of each (cell, id) group, evaluated at its pixels.
 
     The groups' parameters are those of
-    :func:`mitsuba_mrt.fast.quadric_coefficients` (one kernel fits them all);
+    :func:`mitsuba_mrt.recon.within_region.quadric_coefficients` (one kernel fits them all);
     pixel ``i`` at (``py[i]``, ``px[i]``) belongs to group ``member[i]``, and a
     second kernel evaluates its quadric there, reading the coefficients where
     the first left them.  Returns float32 values (m, C); a group without any

@@ -4,7 +4,7 @@
 ``degree`` (-1: none, which is the legacy ``scipy.interpolate.Rbf`` with
 ``function='linear'`` that the report used; 0: a constant; 1: an affine
 function, which makes the interpolant exact for linear fields).  This module
-knows nothing of images or ids; :mod:`mitsuba_mrt.interpolate` calls it.
+knows nothing of images or ids; :mod:`mitsuba_mrt.recon.interpolate` calls it.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import scipy.linalg
 from scipy.spatial.distance import cdist
 
 from . import rbf_fast
-from .errors import MRTError
+from ..errors import MRTError
 from .rbf_solve import solve_linear_rbf_at
 
 #: Elements of the distance matrix evaluated at once (about 32 MB of float64).
@@ -93,7 +93,7 @@ class LinearRBF:
         """Evaluate at ``points`` (m, d); returns (m,) or (m, k).
 
         Integer-valued 2-D points and centres (pixels) are evaluated with
-        :func:`mitsuba_mrt.rbf_fast.grid_distance_sum` when its cost model
+        :func:`mitsuba_mrt.recon.rbf_fast.grid_distance_sum` when its cost model
         says that this beats the dense evaluation; the result then differs
         from the dense one by well under ``1e-4`` (typically ``1e-5``) of the
         largest value of each channel.  Everything else is evaluated densely.

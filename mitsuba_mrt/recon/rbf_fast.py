@@ -1,6 +1,6 @@
 """Fast evaluation of ``sum_j w_j |x - c_j|`` on integer pixel grids.
 
-:class:`mitsuba_mrt.rbf.LinearRBF` evaluates its interpolant densely, which
+:class:`mitsuba_mrt.recon.rbf.LinearRBF` evaluates its interpolant densely, which
 costs O(points x centres).  When both the centres and the evaluation points
 are integer 2-D coordinates (pixels), :func:`grid_distance_sum` computes the
 same sum in roughly O(points + centres + FFT of a coarse grid):
@@ -33,7 +33,7 @@ import scipy.fft
 import scipy.linalg
 import scipy.sparse
 
-from .errors import MRTError
+from ..errors import MRTError
 
 #: Spacing of the coarse grid in pixels.
 CELL = 4

@@ -1,6 +1,6 @@
 """Solving the linear RBF system fast: float32 Cholesky plus float64 refinement.
 
-The system of :class:`mitsuba_mrt.rbf.LinearRBF` is
+The system of :class:`mitsuba_mrt.recon.rbf.LinearRBF` is
 
     [A  P] [w]   [f]
     [P' 0] [c] = [0]        A_ij = |c_i - c_j|,  P the polynomial part,
@@ -29,7 +29,7 @@ import scipy.linalg
 from scipy.linalg import blas, lapack
 from scipy.spatial.distance import cdist
 
-from .threads import for_row_blocks
+from ..runtime.threads import for_row_blocks
 
 #: Systems smaller than this are solved by float64 LU directly.
 MIN_SIZE = 128

@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .errors import MRTError
+from ..errors import MRTError
 
 
 def check_fraction(name: str, value: float) -> float:

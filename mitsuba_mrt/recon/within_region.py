@@ -1,18 +1,16 @@
-"""Fast reconstruction on the traced grid: mode ``fast``.
+"""Within-region interpolation on the traced grid, shared by ``fast``,
+``refine`` and ``idpass``.
 
-The traced pixels form a tensor grid, so the report's two stages become
-gathers and sparse products instead of a recursion and dense RBFs:
+The traced pixels form a tensor grid, so interpolation is gathers and
+sparse products:
 
-* **Ids.**  Every pixel takes the id of its nearest traced pixel (nearest
-  row and nearest column, chosen independently), then the report's
-  Gaussian smoothing (``filter_sigma``, ``filter_cutoff``) softens the
-  boundaries exactly as in the paper mode.
-* **Values.**  Where a pixel's 4 x 4 stencil of traced pixels all carry the
-  pixel's id, a separable cubic (4-point Lagrange along each axis, exact
-  for cubics on the non-uniform grid) gives its value: two sparse products
-  for the whole image.  Near edges, a weighted quadric is fitted per grid
-  cell and id through the samples *of that id* in the cell's 4 x 4 block,
-  so interpolation never crosses an edge.
+* Where a pixel's 4 x 4 stencil of traced pixels all carry the pixel's id,
+  a separable cubic (4-point Lagrange along each axis, exact for cubics on
+  the non-uniform grid) gives its value: two sparse products for the whole
+  image.
+* Near edges, a weighted quadric is fitted per grid cell and id through the
+  samples *of that id* in the cell's 4 x 4 block, so interpolation never
+  crosses an edge.
 
 Radiance is interpolated directly when the albedo is constant within every
 id (then demodulating by albedo changes nothing); otherwise irradiance
@@ -21,7 +19,6 @@ id (then demodulating by albedo changes nothing); otherwise irradiance
 
 from __future__ import annotations
 
-import time
 from collections import Counter
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -29,13 +26,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from . import fast_jit
+from ..runtime.threads import beside
+from . import quadric_jit
 from .compose import albedo_constant_per_id, safe_albedo
-from .edges import region_boxes, smooth_ids
-from .ids import rank_ids
-from .pipeline import MRTParams, Reconstruction, SparseTrace, register_mode
 from .sampling import SamplePattern
-from .threads import beside
 
 
 def cell_coordinates(positions: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
@@ -143,7 +137,7 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     The pixels are grouped by (cell, id) first, so each quadric is fitted
     once (a cell holds about ``1 / sample_fraction`` pixels) and evaluated at
     its pixels.  With ``use_jit`` (default: when Dr.Jit's LLVM backend is
-    usable) the fits run in one Dr.Jit kernel (:mod:`mitsuba_mrt.fast_jit`),
+    usable) the fits run in one Dr.Jit kernel (:mod:`mitsuba_mrt.recon.quadric_jit`),
     otherwise as batched numpy solves; the tests hold the two together.
     """
     nr, nc = grid_ids.shape
@@ -164,9 +158,9 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     centre_y = 0.5 * (rows[gy0] + rows[np.minimum(gy0 + 1, nr - 1)])
     centre_x = 0.5 * (cols[gx0] + cols[np.minimum(gx0 + 1, nc - 1)])
     if use_jit is None:
-        use_jit = fast_jit.available()
+        use_jit = quadric_jit.available()
     if use_jit:
-        values = fast_jit.quadric_values_jit(
+        values = quadric_jit.quadric_values_jit(
             rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x, spacing,
             _RIDGE, member, py, px)
     else:
@@ -363,45 +357,6 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     return out, len(index)
 
 
-def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
-                     tracer=None) -> Reconstruction:
-    """Nearest-sample ids, the report's smoothing, within-id cubic (mode ``fast``).
-
-    Examples
-    --------
-    >>> from mitsuba_mrt.sampling import grid_pattern
-    >>> p = grid_pattern(24, 24, 0.12)
-    >>> x = p.pixel_xy[:, :1].astype(float) ** 2
-    >>> t = SparseTrace(np.repeat(x, 3, 1), np.ones((p.count, 3)), np.ones(p.count, int),
-    ...                 np.zeros(p.count, np.uint32), 0, 1, 0.0)
-    >>> out = fast_reconstruct(p, t, MRTParams(id_rule="exact"))
-    >>> bool(np.allclose(out.image[5, :, 0], np.arange(24.0) ** 2, rtol=1e-5))
-    True
-    """
-    stats = Counter()
-    start = time.perf_counter()
-    # the ids' ranks (int16): the same order and regions, a quarter of the bytes
-    labels, sample_ranks = rank_ids(trace.ids(params.rule_for("fast")))
-    background = 0 if labels[0] == 0 else -1  # ids are >= 0, so id 0 is rank 0
-    grid_ranks = sample_ranks.reshape(pattern.grid_shape)
-    values = TracedGridValues.start(pattern, trace, sample_ranks, background)  # beside the ids
-    rank_map = pattern.nearest_image(grid_ranks)
-    boxes = region_boxes(pattern, grid_ranks)  # one per id
-    stats["regions"] = len(boxes)
-    if stats["regions"] == 1:
-        stats["skipped_edge_finding"] += 1
-    else:
-        rank_map = smooth_ids(rank_map, params.filter_sigma, params.filter_cutoff,
-                              background, boxes)
-    edges_s = time.perf_counter() - start
-
-    start = time.perf_counter()
-    id_map = beside(labels.take, rank_map)  # back to ids, beside the fits
-    image = values.finish(rank_map, stats)
-    return Reconstruction(image, id_map.result(), pattern.mask,
-                          {"edges": edges_s, "interpolate": time.perf_counter() - start}, stats)
-
-
 @dataclass
 class TracedGridValues:
     """Within-id interpolation of the traced grid, in two halves.
@@ -417,66 +372,65 @@ class TracedGridValues:
     """
 
     pattern: SamplePattern
-    trace: SparseTrace
+    radiance: np.ndarray  # (n, 3) traced radiance, grid order
     grid_ids: np.ndarray  # sample ids (or their ranks), shape pattern.grid_shape
-    early: Future         # of _values_and_early(pattern, trace, sample_ids, background)
+    early: Future         # of _values_and_early(pattern, radiance, albedo, sample_ids, background)
 
     @classmethod
-    def start(cls, pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
-              background: int = 0) -> "TracedGridValues":
+    def start(cls, pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
+              sample_ids: np.ndarray, background: int = 0) -> "TracedGridValues":
         """Launch the id-independent half; ``background`` is the id (or rank)
         of the background in ``sample_ids``, -1 if none."""
-        return cls(pattern, trace, sample_ids.reshape(pattern.grid_shape),
-                   beside(_values_and_early, pattern, trace, sample_ids, background))
+        return cls(pattern, radiance, sample_ids.reshape(pattern.grid_shape),
+                   beside(_values_and_early, pattern, radiance, albedo, sample_ids, background))
 
-    def finish(self, id_map: np.ndarray, stats: Counter) -> np.ndarray:
-        """Radiance (height, width, 3) with every pixel's values from its own id;
-        skips and the number of pixels fitted near edges go to ``stats``."""
-        grid_values, constant, skips, early = self.early.result()
-        stats.update(skips)
+    def finish(self, id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
+        """Radiance (height, width, 3) with every pixel's values from its own id,
+        and counts: ``albedo_division`` and ``background`` (shortcuts taken),
+        ``edge_pixels`` (pixels fitted near edges)."""
+        grid_values, constant, counts, early = self.early.result()
         interp, edge_pixels = interpolate_within_ids(
             self.pattern, self.grid_ids, grid_values, id_map, constant, early)
         image = interp if interp.shape[2] == 3 else interp[..., :3] * interp[..., 3:]
-        self.pattern.put_traced(image, self.trace.radiance)
-        stats["edge_pixels"] = int(edge_pixels)
-        return image
+        self.pattern.put_traced(image, self.radiance)
+        counts["edge_pixels"] = int(edge_pixels)
+        return image, counts
 
 
-def _values_and_early(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
-                      background: int = 0):
+def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
+                      sample_ids: np.ndarray, background: int = 0):
     """The grid values to interpolate (float32, grid shape + (3,) radiance or
-    (6,) irradiance and albedo), the constant ids, the skips, and
+    (6,) irradiance and albedo), the constant ids, the shortcut counts, and
     :func:`early_values` of those values."""
-    skips = Counter()
-    albedo = safe_albedo(trace.albedo)
-    constant = black_background(sample_ids, trace.radiance, skips, background)
+    counts = Counter()
+    albedo = safe_albedo(albedo)
+    constant = black_background(sample_ids, radiance, counts, background)
     if albedo_constant_per_id(sample_ids, albedo):
-        skips["skipped_albedo_division"] += 1
-        values = trace.radiance.astype(np.float32)
+        counts["albedo_division"] += 1
+        values = radiance.astype(np.float32)
     else:
-        values = np.concatenate([trace.radiance / albedo, albedo], axis=1).astype(np.float32)
+        values = np.concatenate([radiance / albedo, albedo], axis=1).astype(np.float32)
     values = values.reshape(pattern.grid_shape + (values.shape[1],))
-    return values, constant, skips, early_values(
+    return values, constant, counts, early_values(
         pattern, sample_ids.reshape(pattern.grid_shape), values)
 
 
-def interpolate_traced_grid(pattern: SamplePattern, trace: SparseTrace, sample_ids: np.ndarray,
-                            id_map: np.ndarray, stats: Counter) -> np.ndarray:
+def interpolate_traced_grid(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
+                            sample_ids: np.ndarray,
+                            id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
     """Radiance at every pixel from the traced grid, within each pixel's id
     (both halves of :class:`TracedGridValues` in one call)."""
-    return TracedGridValues.start(pattern, trace, sample_ids).finish(id_map, stats)
+    return TracedGridValues.start(pattern, radiance, albedo, sample_ids).finish(id_map)
 
 
-def black_background(sample_ids: np.ndarray, radiance: np.ndarray, stats: Counter,
+def black_background(sample_ids: np.ndarray, radiance: np.ndarray, counts: Counter,
                      background: int = 0) -> dict:
     """``{background: 0.0}`` when every sample of the ``background`` id is
-    black (it is then filled, never interpolated; counted in ``stats``),
-    else ``{}``."""
+    black (it is then filled, never interpolated; ``counts["background"]``
+    counts it), else ``{}``."""
     seen = sample_ids == background
     if seen.any() and not radiance[seen].any():
-        stats["skipped_background"] += 1
+        counts["background"] += 1
         return {background: 0.0}
     return {}
 
-
-register_mode("fast", fast_reconstruct)

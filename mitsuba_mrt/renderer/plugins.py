@@ -6,9 +6,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .errors import MRTError
-from .pipeline import MRTParams
-from .ids import id_to_paper_float
+from ..errors import MRTError
+from ..types import MRTParams
+from .aovs import AOV_NAMES, aov_images
 from .trace import has_mirrors, is_jit, logical_not
 
 #: The variant whose classes this module defines (it is reloaded on a switch).
@@ -134,7 +134,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - The integrator that traces the sampled pixels (Default: ``path``).
     """
 
-    AOV_NAMES = ("id", "shape_index", "visible_lights", "traced")
+    AOV_NAMES = AOV_NAMES
 
     def __init__(self, props=mi.Properties()):
         super().__init__(props)
@@ -153,7 +153,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
             num_cappoints=int(props.get("num_cappoints", 10)),
             id_rule=str(props.get("id_rule", "auto")),
             rbf_degree=int(props.get("rbf_degree", -1)))
-        # Reconstruction mode (see mitsuba_mrt.api.render).
+        # Reconstruction mode (see mitsuba_mrt.renderer.api.render).
         self.mode = str(props.get("mode", "auto"))
         # Whether mi.render returns the id AOVs after R, G, B.
         self.output_aovs = bool(props.get("aovs", True))
@@ -161,7 +161,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
         self.last_result = None
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
-        from .api import render, resolve_sensor
+        from .api import render
+        from .scene import resolve_sensor
 
         if not develop:
             raise MRTError("mrt: only develop=True is supported")
@@ -204,28 +205,6 @@ def _develop(film, image: np.ndarray, aovs: list, names: list) -> mi.TensorXf:
                           offset=film.crop_offset(), rfilter=film.rfilter(), border=False)
     film.put_block(block)
     return film.develop()
-
-
-def aov_images(result) -> dict[str, np.ndarray]:
-    """Full-resolution id AOVs of an MRTResult, as float32-exact arrays.
-
-    ``id`` is the report's float id under the paper rule, and the rank of
-    the region's id among the image's ids under the exact rule.
-    """
-    from .compose import region_values
-
-    trace, ids = result.trace, result.ids
-    sample_ids = trace.ids(result.params.rule_for(result.mode))
-    if result.params.rule_for(result.mode) == "paper":
-        id_image = id_to_paper_float(ids)
-    else:
-        id_image = np.searchsorted(np.unique(ids), ids).astype(np.float64)
-    return {
-        "id": id_image,
-        "shape_index": region_values(ids, sample_ids, trace.shape_index, "first", 0),
-        "visible_lights": region_values(ids, sample_ids, trace.visible_lights, "first", 0),
-        "traced": result.traced_mask.astype(np.float64),
-    }
 
 
 def register_classes() -> None:

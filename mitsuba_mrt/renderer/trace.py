@@ -17,9 +17,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .errors import MRTError
-from .pipeline import SparseTrace
-from .threads import jit_workers
+from ..errors import MRTError
+from ..types import SparseTrace
+from ..runtime.jit import jit_workers
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32

@@ -3,11 +3,10 @@
 A reconstruction allocates and frees tens of large temporaries (about
 100 MB at 1000 x 1000).  With glibc's default, adaptive thresholds much of
 that memory goes back to the kernel when it is freed, and the next call
-faults it in again, page by page: on this project's 2-core VM the fast mode
-took about 5,000 page faults and 16-23 ms of system time per call, a third
-of its run time.  :func:`keep_freed_memory` fixes the thresholds instead
-(``mallopt``), so that up to :data:`TRIM_THRESHOLD` of freed memory stays
-mapped for the next allocation.  The package calls it once, on import.
+faults it in again, page by page.  :func:`keep_freed_memory` fixes the
+thresholds instead (``mallopt``), so that up to :data:`TRIM_THRESHOLD` of
+freed memory stays mapped for the next allocation.
+:func:`mitsuba_mrt.runtime.configure` calls it; importing the package does not.
 
 It does nothing when ``MITSUBA_MRT_MALLOC=system`` is set, when one of
 glibc's own ``MALLOC_*_`` tuning variables is (the user tuned malloc), or

@@ -1,18 +1,12 @@
 """Row blocks on all cores, for numpy and scipy calls that release the GIL.
 
 ``cdist``, numpy's ufuncs and scipy's filters drop the GIL while they work,
-so plain threads run them side by side.  One pool serves the package.
-
-Dr.Jit's own pool (nanothread) lets its workers poll for work 500,000 times
-after every kernel before they sleep: about 20 ms of a busy core, here, that
-numpy code running next competes with.  :func:`jit_workers_parked` stops
-those workers while the reconstruction's numpy code runs, and
-:func:`jit_workers` brings them back for a burst of kernels.
+so plain threads run them side by side.  One pool serves the package; it is
+created on first use.
 """
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -83,58 +77,3 @@ def beside(function, *args) -> Future:
     except Exception as error:  # delivered by result(), as from the pool
         future.set_exception(error)
     return future
-
-
-#: Dr.Jit thread counts that the open :func:`jit_workers_parked` blocks
-#: replaced with 1 (their own worker-less count), innermost last.
-_parked_counts: list[int] = []
-
-
-@contextlib.contextmanager
-def jit_workers_parked():
-    """Run the block with Dr.Jit's worker threads stopped, then restore them.
-
-    Inside, a Dr.Jit kernel runs on the calling thread alone, unless it is
-    wrapped in :func:`jit_workers`; nobody busy-waits beside numpy.  The
-    thread count the caller had (``drjit.thread_count()``) is restored on
-    exit, also after an exception.
-
-    Examples
-    --------
-    >>> import drjit as dr
-    >>> before = dr.thread_count()
-    >>> with jit_workers_parked():
-    ...     dr.thread_count()
-    1
-    >>> dr.thread_count() == before
-    True
-    """
-    import drjit as dr
-
-    count = dr.thread_count()
-    if count > 1:
-        dr.set_thread_count(1)
-    _parked_counts.append(count)
-    try:
-        yield
-    finally:
-        _parked_counts.pop()
-        if count > 1:
-            dr.set_thread_count(count)
-
-
-@contextlib.contextmanager
-def jit_workers():
-    """Inside :func:`jit_workers_parked`: Dr.Jit's workers for one burst of
-    kernels (a trace, a fit), stopped again after it; elsewhere a no-op."""
-    count = _parked_counts[-1] if _parked_counts else 1
-    if count <= 1:
-        yield
-        return
-    import drjit as dr
-
-    dr.set_thread_count(count)
-    try:
-        yield
-    finally:
-        dr.set_thread_count(1)

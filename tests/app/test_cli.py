@@ -17,7 +17,7 @@ def run_cli(*args, cwd=ROOT):
 
 def test_render_writes_every_output(tmp_path):
     proc = run_cli("render", SCENES / "paper_fraction.xml", "-o", tmp_path, "-D", "res=48",
-                   "--sample-fraction", "0.2")
+                   "--sample-fraction", "0.2", "--mode", "refine")
     assert proc.returncode == 0, proc.stderr
     assert len(proc.stdout.strip().splitlines()) == 1 and "error" in proc.stdout
     names = {p.name for p in tmp_path.iterdir()}
@@ -26,17 +26,32 @@ def test_render_writes_every_output(tmp_path):
     summary = json.loads((tmp_path / "paper_fraction.json").read_text())
     assert summary["width"] == summary["height"] == 48  # -D res=48 took effect
     assert summary["sample_fraction"] == 0.2
-    assert set(summary["timings"]) == {"trace", "edges", "interpolate", "total"}
-    for key in ("variant", "traced_pixels", "reference_time_s", "error", "psnr_db", "params"):
+    timings = summary["timings"]
+    assert set(timings) == {"trace", "trace_more", "edges", "interpolate", "full_render",
+                            "other", "total"}
+    # the parts add up to the total
+    assert sum(v for k, v in timings.items() if k != "total") == pytest.approx(timings["total"])
+    assert summary["traced"]["grid"] > 0 and summary["traced"]["more"] > 0  # refine's edges
+    for key in ("variant", "why", "reference_time_s", "error", "psnr_db", "params"):
         assert key in summary
     assert 0.0 <= summary["error"] < 0.05
 
-    from mitsuba_mrt.imageio import read_exr
+    from mitsuba_mrt.app.imageio import read_exr
 
     channels = read_exr(tmp_path / "paper_fraction_mrt.exr")
     assert {"R", "G", "B", "id", "shape_index", "visible_lights", "traced"} <= set(channels)
-    assert channels["traced"].sum() == summary["traced_pixels"]
+    assert channels["traced"].sum() == sum(summary["traced"].values())
     assert channels["R"].shape == (48, 48)
+
+
+def test_auto_in_full_renders_once_and_says_so(tmp_path):
+    proc = run_cli("render", SCENES / "paper_fraction.xml", "-o", tmp_path, "-D", "res=32")
+    assert proc.returncode == 0, proc.stderr
+    assert "mode full (auto: too few samples" in proc.stdout and "PSNR" not in proc.stdout
+    summary = json.loads((tmp_path / "paper_fraction.json").read_text())
+    assert summary["mode_used"] == "full" and summary["error"] is None
+    assert summary["reference_time_s"] == summary["timings"]["full_render"] > 0
+    assert not (tmp_path / "paper_fraction_ref.exr").exists()
 
 
 def test_json_flag_and_no_reference(tmp_path):
@@ -57,7 +72,7 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "--variant", "llvm_rgb"], "invalid choice"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res"], "name=value"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),
-    (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "--spp"),
+    (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "spp must be >= 1"),
     (["render", SCENES / "paper_fraction.xml", "--mode", "magic"], "unknown mode"),
 ]
 
@@ -93,7 +108,7 @@ def test_inf_radiance_leaves_no_output(tmp_path):
 
 def test_failed_write_leaves_no_partial_file(tmp_path):
     from mitsuba_mrt import MRTError
-    from mitsuba_mrt.imageio import write_exr
+    from mitsuba_mrt.app.imageio import write_exr
 
     target = tmp_path / "x.exr"
     with pytest.raises(MRTError):

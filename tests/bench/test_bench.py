@@ -4,9 +4,10 @@ import math
 
 import pytest
 
-from mitsuba_mrt import bench
-from mitsuba_mrt.cli import main
-from mitsuba_mrt.pipeline import MODES, paper_reconstruct, register_mode
+from mitsuba_mrt.bench import experiments as bench
+from mitsuba_mrt.app.cli import main
+from mitsuba_mrt.modes import MODES
+from mitsuba_mrt.modes.paper import paper_reconstruct
 
 from conftest import SCENES
 
@@ -76,16 +77,14 @@ def test_quick_tradeoff_reports_converged_and_equal_time(tmp_path):
     assert (tmp_path / "tradeoff.png").is_file() and (tmp_path / "tradeoff_triptych.png").is_file()
 
 
-def test_method_names_follow_modes_at_run_time():
+def test_method_names_follow_modes_at_run_time(monkeypatch):
     assert bench.resolve_methods()[0] == "full"
     assert bench.method_name("paper") == "mrt-paper" and bench.method_name("nearest") == "nearest"
-    register_mode("bench_test_mode", paper_reconstruct)
-    try:
+    with monkeypatch.context() as patch:
+        patch.setitem(MODES, "bench_test_mode", paper_reconstruct)
         assert "mrt-bench_test_mode" in bench.resolve_methods()
         assert bench.resolve_methods("bench_test_mode,bicubic") == [
             "full", "mrt-bench_test_mode", "bicubic"]
-    finally:
-        del MODES["bench_test_mode"]
     assert "mrt-bench_test_mode" not in bench.resolve_methods()
     with pytest.raises(bench.MRTError, match="unknown method 'nope'"):
         bench.resolve_methods("mrt-paper,nope")
@@ -144,7 +143,7 @@ def test_memory_meter_reports_a_peak():
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["bench", "fraction", "--repeats", "0"], "--repeats must be >= 1"),
+    (["bench", "fraction", "--repeats", "0"], "--repeats must be an integer >= 1"),
     (["bench", "fraction", "--methods", "mrt-nope"], "unknown method 'mrt-nope'"),
     (["bench", "pixels", "--res", "100"], "--res does not apply"),
     (["bench", "fraction", "--scenes", "/nonexistent"], "scenes are not in"),
@@ -163,7 +162,7 @@ def test_unknown_experiment_is_an_argparse_error(capsys):
     assert "invalid choice" in err and len(err.strip().splitlines()) == 1
 
 
-def test_a_broken_mode_is_reported_not_fatal(tmp_path):
+def test_a_broken_mode_is_reported_not_fatal(tmp_path, monkeypatch):
     import numpy as np
 
     def nan_mode(pattern, trace, params, tracer=None):
@@ -174,14 +173,11 @@ def test_a_broken_mode_is_reported_not_fatal(tmp_path):
     def raising_mode(pattern, trace, params, tracer=None):
         raise RuntimeError("boom\nsecond line")
 
-    register_mode("bench_nan", nan_mode)
-    register_mode("bench_raise", raising_mode)
-    try:
-        result = bench.run_experiment("objects", tmp_path, quick=True, progress=False, res=24,
-                                      methods="bench_nan,bench_raise,nearest",
-                                      scenes_dir=SCENES)["objects"]
-    finally:
-        del MODES["bench_nan"], MODES["bench_raise"]
+    monkeypatch.setitem(MODES, "bench_nan", nan_mode)
+    monkeypatch.setitem(MODES, "bench_raise", raising_mode)
+    result = bench.run_experiment("objects", tmp_path, quick=True, progress=False, res=24,
+                                  methods="bench_nan,bench_raise,nearest",
+                                  scenes_dir=SCENES)["objects"]
     rows = result["rows"]
     status = {r["method"]: r["status"] for r in rows}
     assert status["full"] == status["nearest"] == "ok"

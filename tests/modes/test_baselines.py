@@ -1,7 +1,7 @@
 import numpy as np
 
 from mitsuba_mrt import SparseTrace, grid_pattern, reconstruct
-from mitsuba_mrt.baselines import upsample_nearest, upsample_spline
+from mitsuba_mrt.recon.upsample import upsample_nearest, upsample_spline
 
 
 def test_nearest_copies_the_nearest_traced_pixel():

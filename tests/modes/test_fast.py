@@ -2,10 +2,13 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
-from mitsuba_mrt import fast, fast_jit, threads
-from mitsuba_mrt.compose import ALBEDO_EPS, albedo_constant_per_id
-from mitsuba_mrt.edges import quadtree_fill, region_boxes, smooth_ids
-from mitsuba_mrt.fast import interpolate_within_ids, local_poly_fit, separable_cubic
+from mitsuba_mrt.modes import fast as fast_mode
+from mitsuba_mrt.recon import quadric_jit as fast_jit
+from mitsuba_mrt.recon import within_region as fast
+from mitsuba_mrt.runtime import jit, threads
+from mitsuba_mrt.recon.compose import ALBEDO_EPS, albedo_constant_per_id
+from mitsuba_mrt.recon.edges import quadtree_fill, region_boxes, smooth_ids
+from mitsuba_mrt.recon.within_region import interpolate_within_ids, local_poly_fit, separable_cubic
 
 
 def trace_from(pattern, values, shape_index=None, albedo=None):
@@ -74,12 +77,12 @@ def test_region_boxes_hold_every_pixel_of_each_id(fill, seed):
 def test_skips_fire_and_are_counted():
     p = grid_pattern(32, 32, 0.2)
     one_id = reconstruct(p, trace_from(p, np.ones(p.count)), mode="fast")
-    assert one_id.stats["skipped_edge_finding"] == 1
-    assert one_id.stats["skipped_albedo_division"] == 1
+    assert one_id.skips.edge_finding == 1
+    assert one_id.skips.albedo_division == 1
     textured = np.where((p.pixel_xy[:, :1] // 8) % 2 == 0, 0.2, 0.8) * np.ones((1, 3))
     radiance = textured * (1 + p.pixel_xy[:, :1] / 32.0)
     out = reconstruct(p, trace_from(p, radiance, albedo=textured), mode="fast")
-    assert out.stats["skipped_albedo_division"] == 0
+    assert out.skips.albedo_division == 0
 
 
 def test_traced_pixels_are_exact():
@@ -198,14 +201,14 @@ def test_jit_workers_parked_then_restored(three_jit_threads):
     import drjit as dr
 
     with pytest.raises(ZeroDivisionError):
-        with threads.jit_workers_parked():
+        with jit.jit_workers_parked():
             assert dr.thread_count() == 1
-            with threads.jit_workers():
+            with jit.jit_workers():
                 assert dr.thread_count() == three_jit_threads
             assert dr.thread_count() == 1
             1 / 0
     assert dr.thread_count() == three_jit_threads
-    with threads.jit_workers():  # not parked: nothing to do
+    with jit.jit_workers():  # not parked: nothing to do
         assert dr.thread_count() == three_jit_threads
 
 
@@ -223,7 +226,7 @@ def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, m
             return function(*args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(fast, "smooth_ids", spy("smoothing", fast.smooth_ids))
+    monkeypatch.setattr(fast_mode, "smooth_ids", spy("smoothing", fast_mode.smooth_ids))
     monkeypatch.setattr(fast_jit, "_quadric_values", spy("fits", fast_jit._quadric_values))
     p = grid_pattern(48, 40, 0.15)
     shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)

@@ -2,7 +2,7 @@ import mitsuba as mi
 import numpy as np
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import paper_error
+from mitsuba_mrt.recon.metrics import paper_error
 from conftest import small_scene_xml, true_ids
 
 CHECKER_PLANE = """<shape type="rectangle">

@@ -4,8 +4,8 @@ import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
-from mitsuba_mrt.metrics import paper_error
-from mitsuba_mrt.refine import refine_edges
+from mitsuba_mrt.recon.metrics import paper_error
+from mitsuba_mrt.modes.refine import refine_edges
 from conftest import small_scene_xml, true_ids
 
 

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTError
-from mitsuba_mrt.compose import compose, demodulate, region_albedo, safe_albedo
-from mitsuba_mrt.metrics import error_map, paper_error, psnr
+from mitsuba_mrt.recon.compose import compose, demodulate, region_albedo, safe_albedo
+from mitsuba_mrt.recon.metrics import error_map, paper_error, psnr
 
 
 def test_paper_error_is_mean_abs_over_pixels_and_channels():
@@ -55,7 +55,7 @@ def test_compose_keeps_traced_pixels():
 
 
 def test_region_albedo_with_nearest_grid_sample_takes_a_nearest_sample_of_the_same_id():
-    from mitsuba_mrt.sampling import grid_pattern
+    from mitsuba_mrt.recon.sampling import grid_pattern
 
     rng = np.random.default_rng(3)
     p = grid_pattern(37, 29, 0.1)

@@ -3,8 +3,8 @@ import pytest
 from scipy import ndimage
 
 from mitsuba_mrt import MRTError, SamplePattern, grid_pattern
-from mitsuba_mrt import edges
-from mitsuba_mrt.edges import quadtree_fill, smooth_ids
+from mitsuba_mrt.recon import edges
+from mitsuba_mrt.recon.edges import quadtree_fill, smooth_ids
 
 
 def pattern(h, w, rows, cols):
@@ -224,7 +224,7 @@ def test_blur_is_gaussian_filter_bit_for_bit(sigma, row_blocks, monkeypatch):
 @pytest.mark.parametrize("with_background", [True, False])
 def test_smoothing_ranks_equals_smoothing_ids(with_background):
     # the fast mode smooths int16 ranks of the ids; order and background kept
-    from mitsuba_mrt.ids import rank_ids
+    from mitsuba_mrt.recon.ids import rank_ids
 
     rng = np.random.default_rng(7)
     ids = ndimage.zoom(rng.choice([0, 5, 1 << 33, 3 << 32, 9], (7, 8)), 9, order=0)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTError
-from mitsuba_mrt.ids import blocked_count, encode_ids, id_to_paper_float
+from mitsuba_mrt.recon.ids import blocked_count, encode_ids, id_to_paper_float
 
 
 def test_paper_rule_is_shape_plus_half_per_blocked_light():

@@ -2,8 +2,9 @@ import numpy as np
 import pytest
 from scipy.interpolate import Rbf, RBFInterpolator
 
-from mitsuba_mrt import MRTError, rbf_fast
-from mitsuba_mrt.rbf import LinearRBF
+from mitsuba_mrt import MRTError
+from mitsuba_mrt.recon import rbf_fast
+from mitsuba_mrt.recon.rbf import LinearRBF
 
 rng = np.random.default_rng(0)
 CENTRES = rng.uniform(0, 100, (200, 2))
@@ -68,7 +69,7 @@ def test_vector_values_share_the_system():
 
 
 def test_chunked_evaluation_is_seamless(monkeypatch):
-    import mitsuba_mrt.rbf as rbf_module
+    import mitsuba_mrt.recon.rbf as rbf_module
 
     full = LinearRBF(CENTRES, VALUES)(QUERY)
     monkeypatch.setattr(rbf_module, "EVAL_BLOCK_ELEMENTS", 1000)

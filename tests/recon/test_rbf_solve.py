@@ -3,7 +3,7 @@ import pytest
 import scipy.linalg
 from scipy.spatial.distance import cdist
 
-from mitsuba_mrt import rbf_solve
+from mitsuba_mrt.recon import rbf_solve
 
 rng = np.random.default_rng(7)
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import paper_error
+from mitsuba_mrt.recon.metrics import paper_error
 from conftest import SCENES
 
 

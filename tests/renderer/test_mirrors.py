@@ -2,7 +2,7 @@ import mitsuba as mi
 import numpy as np
 
 import mitsuba_mrt
-from mitsuba_mrt.metrics import edge_mask, error_map
+from mitsuba_mrt.recon.metrics import edge_mask, error_map
 from conftest import small_scene_xml
 
 # A mirror facing the camera, two spheres behind the camera: they are seen
@@ -39,7 +39,7 @@ def test_a_mirror_reflecting_two_spheres_yields_two_regions(variant):
 
 
 def test_refinement_resolves_reflected_edges(variant):
-    from mitsuba_mrt.trace import ordered_shapes
+    from mitsuba_mrt.renderer.trace import ordered_shapes
 
     res = 200
     scene = mitsuba_mrt.load_scene("scenes_xml/paper_fig1_conductor.xml", res=res)

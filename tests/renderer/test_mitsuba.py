@@ -7,7 +7,7 @@ import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt import MRTError, grid_pattern
-from mitsuba_mrt.metrics import paper_error
+from mitsuba_mrt.recon.metrics import paper_error
 from conftest import small_scene_xml
 
 LIGHTS = [((2.0, 2.0, 5.0), 60.0), ((-3.0, 0.0, 4.0), 40.0)]
@@ -217,26 +217,27 @@ def test_auto_renders_small_jobs_in_full_without_a_pilot(variant):
     scene = mi.load_string(small_scene_xml(32))
     result = mitsuba_mrt.render(scene)
     reference, _ = mitsuba_mrt.render_reference(scene)
-    assert result.stats["mode_used"] == "full" and result.stats["auto_reason"] == "small"
+    assert result.mode_used == "full" and result.auto.reason == "small"
     assert np.allclose(result.image, reference)
 
 
 @pytest.mark.parametrize("margin,used", [(0.0, "full"), (1e9, "mrt")])
 def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch, margin, used):
-    import mitsuba_mrt.api as api
+    from mitsuba_mrt.renderer import auto
 
-    monkeypatch.setattr(api, "AUTO_MARGIN", margin)
+    monkeypatch.setattr(auto, "AUTO_MARGIN", margin)
     scene = mi.load_string(small_scene_xml(512))  # 2^18 samples, 8 spp: 2^21, a pilot
     result = mitsuba_mrt.render(scene, spp=8)
     reference, _ = mitsuba_mrt.render_reference(scene, spp=8)
-    assert result.stats["auto_reason"] == "pilot"
+    decision = result.auto
+    assert decision.reason == "pilot" and result.mode_used == decision.mode_used
     if used == "mrt":
-        assert result.stats["mode_used"] in ("refine", "idpass")
-        assert result.stats["predicted_mrt_s"] == min(result.stats["predicted_refine_s"],
-                                                      result.stats["predicted_idpass_s"])
+        assert decision.mode_used in ("refine", "idpass")
+        assert decision.predicted_mrt_s == min(decision.predicted_refine_s,
+                                               decision.predicted_idpass_s)
     else:
-        assert result.stats["mode_used"] == "full"
-    assert result.stats["predicted_full_s"] > 0 and result.stats["predicted_mrt_s"] > 0
+        assert decision.mode_used == "full"
+    assert decision.predicted_full_s > 0 and decision.predicted_mrt_s > 0
     if used == "full":  # the pilot's band is kept; matte is deterministic
         assert np.allclose(result.image, reference, atol=1e-6)
     else:
@@ -254,11 +255,11 @@ def test_auto_renders_in_full_in_the_scalar_variant(variant):
         result = mitsuba_mrt.render(mi.load_string(xml))  # checked before the job size
     finally:
         mi.set_variant(variant)
-    assert result.stats["mode_used"] == "full" and result.stats["auto_reason"] == "scalar"
+    assert result.mode_used == "full" and result.auto.reason == "scalar"
 
 
 def test_auto_keeps_mirror_chains_when_it_merges_the_pilot(variant):
-    from mitsuba_mrt.api import _merge_rows
+    from mitsuba_mrt.renderer.auto import merge_rows
 
     p = grid_pattern(8, 8, 0.5)
     nr, nc = p.grid_shape
@@ -268,6 +269,6 @@ def test_auto_keeps_mirror_chains_when_it_merges_the_pilot(variant):
                                        np.zeros(n, np.uint32), 0, 1, 0.0,
                                        path_id=np.arange(n, dtype=np.int64) + offset)
     a_rows, b_rows = np.arange(0, nr, 2), np.arange(1, nr, 2)
-    merged = _merge_rows(p, a_rows, part(a_rows, 0), b_rows, part(b_rows, 1000))
+    merged = merge_rows(p, a_rows, part(a_rows, 0), b_rows, part(b_rows, 1000))
     assert merged.path_id is not None
     assert np.array_equal(merged.path_id.reshape(nr, nc)[1], np.arange(nc) + 1000)

@@ -2,7 +2,7 @@ import os
 
 import pytest
 
-from mitsuba_mrt import allocator
+from mitsuba_mrt.runtime import allocator
 
 
 def _glibc() -> bool:

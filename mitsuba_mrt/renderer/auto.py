@@ -1,0 +1,170 @@
+"""Mode ``auto``: choose ``refine``, ``idpass`` or a full render from a measured pilot."""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..modes import reconstruct
+from ..recon.sampling import SamplePattern, grid_pattern
+from ..types import MRTParams, SeedStream, SparseTrace, Tracer
+
+#: ``auto`` runs the MRT only when its predicted time is below this share of
+#: the predicted full render: a wide margin, since the pilot is small.
+AUTO_MARGIN = 0.6
+#: ``auto``'s pilot traces the top 1/AUTO_BAND of the image's rows.
+AUTO_BAND = 16
+#: Below this many samples (pixels x spp) ``auto`` renders in full without a
+#: pilot: the pilot's own launches would cost more than the MRT could save.
+AUTO_MIN_SAMPLES = 1 << 21
+#: Share of the pixels that ``refine`` is expected to trace beyond the grid.
+AUTO_REFINE_SHARE = 0.06
+
+
+@dataclass
+class AutoDecision:
+    """What ``auto`` chose, and why.
+
+    Attributes
+    ----------
+    mode_used : str
+        ``refine``, ``idpass`` or ``full``.
+    reason : str
+        ``pilot`` (measured), ``small`` (too few samples for a pilot to pay)
+        or ``scalar`` (the scalar variant, where the MRT cannot win).
+    pilot_pixels : int
+        Pixels the pilot traced (its band and its grid rows).
+    predicted_full_s, predicted_refine_s, predicted_idpass_s, predicted_mrt_s : float or None
+        The pilot's predictions for the whole image (``predicted_mrt_s`` the
+        cheaper MRT mode's).
+    """
+
+    mode_used: str
+    reason: str
+    pilot_pixels: int = 0
+    predicted_full_s: float | None = None
+    predicted_refine_s: float | None = None
+    predicted_idpass_s: float | None = None
+    predicted_mrt_s: float | None = None
+
+
+@dataclass
+class Pilot:
+    """What the pilot traced: every pixel of the top rows, and the grid rows in them."""
+
+    band: SparseTrace      # radiance of every pixel of the band, row by row
+    band_height: int
+    rows: np.ndarray       # indices of the grid rows inside the band
+    grid: SparseTrace      # those grid rows' samples, with the id AOVs
+
+
+def decide_without_pilot(width: int, height: int, spp: int, jit: bool) -> AutoDecision | None:
+    """``auto``'s decision when no pilot is worth running, else None.
+
+    The scalar variant traces pixel by pixel in Python while ``mi.render``
+    runs Mitsuba's multithreaded C++ loop, so the MRT cannot win there;
+    below ``AUTO_MIN_SAMPLES`` samples the pilot would cost more than the
+    MRT could save.
+    """
+    if not jit:
+        return AutoDecision("full", "scalar")
+    if width * height * spp < AUTO_MIN_SAMPLES or height < 2 * AUTO_BAND:
+        return AutoDecision("full", "small")
+    return None
+
+
+def decide(pattern: SamplePattern, tracer: Tracer) -> tuple[AutoDecision, Pilot]:
+    """Decide between refine, idpass and a full render from a measured pilot.
+
+    The pilot traces the top ``1 / AUTO_BAND`` of the image: every pixel with
+    the nested integrator alone (what a full render pays; kept as part of the
+    image whatever wins) and the grid rows in it with the id AOVs (what the
+    MRT pays per traced pixel; the difference is the id AOVs' cost).  Scaled
+    to the whole image, with the reconstruction's cost per pixel calibrated
+    once per process: ``refine`` adds ``AUTO_REFINE_SHARE`` of the pixels
+    traced in full, ``idpass`` the id AOVs of every pixel.  The cheaper runs
+    only if it is predicted below ``AUTO_MARGIN`` of the full render.
+    """
+    nr, _ = pattern.grid_shape
+    width, height = pattern.width, pattern.height
+    pixels = width * height
+    band_height = height // AUTO_BAND
+    band_xy = np.stack(np.meshgrid(np.arange(width), np.arange(band_height)), -1).reshape(-1, 2)
+    band = tracer(band_xy, stream=SeedStream.BAND, aovs=False)
+    xy = pattern.pixel_xy.reshape(nr, -1, 2)
+    rows = np.flatnonzero(pattern.rows < band_height)
+    grid = tracer(xy[rows].reshape(-1, 2), stream=SeedStream.PILOT)
+    scale = height / band_height
+    predicted_full = band.seconds * scale
+    radiance_per_pixel = band.seconds / len(band_xy)
+    aov_per_pixel = max(grid.seconds / max(len(grid.radiance), 1) - radiance_per_pixel,
+                        0.1 * radiance_per_pixel)
+    grid_and_reconstruction = (grid.seconds * nr / max(len(rows), 1)
+                               + reconstruction_seconds_per_pixel() * pixels)
+    predicted = {"refine": grid_and_reconstruction
+                 + AUTO_REFINE_SHARE * pixels * (radiance_per_pixel + aov_per_pixel),
+                 "idpass": grid_and_reconstruction + pixels * aov_per_pixel}
+    best = min(predicted, key=predicted.get)
+    wins = predicted[best] < AUTO_MARGIN * predicted_full
+    decision = AutoDecision(best if wins else "full", "pilot",
+                            pilot_pixels=int(len(band_xy) + grid.radiance.shape[0]),
+                            predicted_full_s=predicted_full,
+                            predicted_refine_s=predicted["refine"],
+                            predicted_idpass_s=predicted["idpass"],
+                            predicted_mrt_s=predicted[best])
+    return decision, Pilot(band, band_height, rows, grid)
+
+
+def rest_of_grid(pattern: SamplePattern, pilot: Pilot, tracer: Tracer) -> SparseTrace:
+    """The grid's trace: the pilot's rows and the rest, traced now, in grid order.
+
+    Its ``seconds`` are both traces' (the band's are not included).
+    """
+    nr, nc = pattern.grid_shape
+    rest_rows = np.setdiff1d(np.arange(nr), pilot.rows)
+    rest = tracer(pattern.pixel_xy.reshape(nr, nc, 2)[rest_rows].reshape(-1, 2),
+                  stream=SeedStream.GRID)
+    merged = merge_rows(pattern, pilot.rows, pilot.grid, rest_rows, rest)
+    return replace(merged, seconds=pilot.grid.seconds + rest.seconds)
+
+
+def merge_rows(pattern: SamplePattern, rows_a: np.ndarray, trace_a: SparseTrace,
+               rows_b: np.ndarray, trace_b: SparseTrace) -> SparseTrace:
+    """Two traces of disjoint grid rows, as one trace in grid order."""
+    nr, nc = pattern.grid_shape
+    order = np.empty(nr, dtype=np.int64)
+    order[np.concatenate([rows_a, rows_b])] = np.arange(nr)
+
+    def merge(a, b):
+        both = np.concatenate([a.reshape(len(rows_a), nc, -1), b.reshape(len(rows_b), nc, -1)])
+        return both[order].reshape((nr * nc,) + a.shape[1:])
+    optional = {name: None if getattr(trace_a, name) is None
+                else merge(getattr(trace_a, name), getattr(trace_b, name))
+                for name in ("path_id", "curved_mirror")}
+    return replace(trace_a, radiance=merge(trace_a.radiance, trace_b.radiance),
+                   albedo=merge(trace_a.albedo, trace_b.albedo),
+                   shape_index=merge(trace_a.shape_index, trace_b.shape_index),
+                   visible_lights=merge(trace_a.visible_lights, trace_b.visible_lights),
+                   seconds=0.0, **optional)
+
+
+@functools.cache
+def reconstruction_seconds_per_pixel() -> float:
+    """Seconds per pixel of the fast reconstruction, measured once per process.
+
+    A synthetic 256 x 256 scene of two regions stands in for a real one;
+    the result is doubled, since real scenes have more edges.
+    """
+    p = grid_pattern(256, 256, 0.1)
+    x, y = p.pixel_xy[:, 0], p.pixel_xy[:, 1]
+    shape = 1 + ((x - 128) ** 2 + (y - 128) ** 2 < 60 ** 2)
+    rad = np.repeat((0.5 + 0.001 * x)[:, None], 3, axis=1)
+    trace = SparseTrace(rad, np.ones((p.count, 3)), shape, np.zeros(p.count, np.uint32),
+                        0, 1, 0.0)
+    reconstruct(p, trace, MRTParams(id_rule="exact"), "fast")  # warm caches
+    begin = time.perf_counter()
+    reconstruct(p, trace, MRTParams(id_rule="exact"), "fast")
+    return 2.0 * (time.perf_counter() - begin) / (256 * 256)
