@@ -89,7 +89,8 @@ class SparseTrace:
     radiance : ndarray, shape (n, 3)
         Mean radiance of the pixel's samples, from the nested integrator.
     albedo : ndarray, shape (n, 3)
-        Diffuse reflectance at the pixel-centre hit (0 on a miss or a mirror).
+        Albedo of the pixel's first hits for the view direction, in [0, 1]
+        (0 on a miss).
     shape_index : ndarray of int64, shape (n,)
         0 for background, else 1 + the shape's position in :func:`ordered_shapes`.
     visible_lights : ndarray of uint32, shape (n,)
@@ -107,6 +108,12 @@ class SparseTrace:
     path_id : ndarray of int64, shape (n,), optional
         The chain of shapes met along specular (mirror) bounces, encoded
         as one integer (equal to ``shape_index`` without mirrors).
+    alpha : ndarray, shape (n,), optional
+        Alpha as ``mi.render`` develops it: the share of the pixel's samples
+        whose camera ray hit something (None where radiance was not traced).
+    variance : ndarray, shape (n, 3), optional
+        Variance of one sample's RGB about the pixel's mean: the pixel's
+        noise is about ``sqrt(variance / spp)``.
     curved_mirror : ndarray of bool, shape (n,), optional
         True where the pixel-centre ray first hits a curved mirror (see
         :func:`mitsuba_mrt.renderer.trace.curved_mirror_indices`); None when the
@@ -123,6 +130,8 @@ class SparseTrace:
     shadow_rays: bool = True
     path_id: np.ndarray | None = None
     curved_mirror: np.ndarray | None = None
+    alpha: np.ndarray | None = None
+    variance: np.ndarray | None = None
 
     def ids(self, rule: str) -> np.ndarray:
         """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).

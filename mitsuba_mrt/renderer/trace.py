@@ -1,18 +1,25 @@
 """Stage 2: tracing only the sampled pixels, with their ids (Mitsuba-specific).
 
-In a JIT variant (LLVM, CUDA) every sample of every traced pixel is one lane
-of a single Dr.Jit wavefront.  The scalar variant has no wavefronts, so it
-loops over the traced pixels in Python, calling the same helpers.
+A traced pixel is what ``mi.render`` gives at that pixel: its samples
+follow the film's reconstruction filter (:mod:`.pixel_filter`) and are
+developed as Mitsuba's own image block does, spectra converted to the RGB
+that ``mi.render`` writes, alpha included.  In a JIT variant (LLVM, CUDA)
+every sample of every traced pixel is one lane of a single Dr.Jit
+wavefront; the scalar variant loops over the samples in Python.
 
-Besides the nested integrator's radiance, one extra ray through each pixel
-centre gives the AOVs the reconstruction needs: the hit shape, the surface
-albedo, and which point and spot lights the hit point sees.
+Each sample also gives the albedo of its first hit, the directional albedo
+of the BSDF for the view direction (the mean weight of a BSDF sample),
+averaged like the radiance: what multiplies the incoming light, bounded by
+one.  One extra ray through each pixel centre gives the ids: the hit shape,
+the mirror chain, and which point and spot lights the hit point sees.
 """
 
 from __future__ import annotations
 
 import re
 import time
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -20,6 +27,7 @@ import numpy as np
 from ..errors import MRTError
 from ..types import SparseTrace
 from ..runtime.jit import jit_workers
+from .pixel_filter import filter_table
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32
@@ -122,20 +130,65 @@ def _to_numpy(value, width: int) -> np.ndarray:
     return np.broadcast_to(arr, (width,)).copy()
 
 
-def _camera_ray(sensor, sampler, pixel, spp: int, centre: bool = False):
-    """A camera ray through ``pixel`` (+ a sample offset, or the pixel centre)."""
+def _camera_ray(sensor, sampler, position, spp: int, centre: bool = False):
+    """A camera ray through ``position`` (crop-relative pixel coordinates).
+
+    ``centre`` rays use no random numbers: no aperture, time or wavelength
+    sample.
+    """
     film_size = mi.ScalarVector2f(sensor.film().crop_size())
-    offset = mi.Point2f(0.5, 0.5) if centre else sampler.next_2d()
-    position = (pixel + offset) / film_size
     aperture = sampler.next_2d() if (sensor.needs_aperture_sample() and not centre) \
         else mi.Point2f(0.5, 0.5)
     ray_time = sensor.shutter_open()
     if sensor.shutter_open_time() > 0 and not centre:
         ray_time += sampler.next_1d() * sensor.shutter_open_time()
     wavelength = sampler.next_1d() if (mi.is_spectral and not centre) else 0.0
-    ray, weight = sensor.sample_ray_differential(ray_time, wavelength, position, aperture)
+    ray, weight = sensor.sample_ray_differential(ray_time, wavelength, position / film_size,
+                                                 aperture)
     ray.scale_differential(dr.rsqrt(float(spp)))
     return ray, weight
+
+
+def _rgb(value, wavelengths, active=True):
+    """A sample's value as the RGB that ``mi.render`` develops (spectra converted)."""
+    if mi.is_polarized:
+        value = mi.unpolarized_spectrum(value)
+    if mi.is_spectral:
+        return mi.spectrum_to_srgb(value, wavelengths, active)
+    return mi.Color3f(value)
+
+
+def _directional_albedo(scene, sampler, ray, active):
+    """What multiplies the light arriving at the first hit: its BSDF's albedo
+    for the view direction, one BSDF sample's weight, clamped to [0, 1] (RGB).
+
+    Through mirrors and glass (delta BSDFs) the path is followed, up to
+    ``MIRROR_DEPTH`` bounces, and the albedo is that of the surface seen
+    times the specular throughput; 0 on a miss.  The mean over a pixel's
+    samples estimates the pixel's albedo the way its radiance is estimated.
+    """
+    albedo = mi.Color3f(0.0)
+    throughput = mi.Color3f(1.0)
+    ray = mi.Ray3f(ray)
+    active = mi.Bool(active) if is_jit() else bool(active)
+    for depth in range(MIRROR_DEPTH + 1):
+        si = scene.ray_intersect(ray, active)
+        valid = active & si.is_valid() if is_jit() else bool(active and si.is_valid())
+        if not (is_jit() or valid):
+            break
+        bsdf = si.bsdf(ray)
+        bs, weight = bsdf.sample(mi.BSDFContext(), si, sampler.next_1d(valid),
+                                 sampler.next_2d(valid), valid)
+        weight = dr.clip(_rgb(weight, si.wavelengths, valid), 0.0, 1.0)
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        done = valid & (bs.pdf > 0.0) & (logical_not(delta) if depth < MIRROR_DEPTH else True)
+        albedo = dr.select(done, throughput * weight, albedo)
+        if not is_jit() and done:
+            break
+        active = valid & (bs.pdf > 0.0) & logical_not(done)
+        throughput = throughput * weight
+        ray = si.spawn_ray(si.to_world(bs.wo))
+    return albedo
 
 
 def shadow_rule(scene: mi.Scene, lights: list) -> str:
@@ -160,21 +213,15 @@ def shadow_rule(scene: mi.Scene, lights: list) -> str:
 def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
     """The id AOVs of the first hit of ``ray``.
 
-    Returns (first hit, its validity, albedo, visible-light bit mask,
-    mirror chain).  With ``mirrors``, specular bounces are followed first:
-    albedo and light visibility are those of the final hit (the albedo
-    times the mirrors' reflectance), and the chain lists the bounces.
+    Returns (first hit, its validity, visible-light bit mask, mirror
+    chain).  With ``mirrors``, specular bounces are followed first: light
+    visibility is that of the final hit, and the chain lists the bounces.
     """
     first = si = scene.ray_intersect(ray)
     first_valid = valid = si.is_valid()
     chain = []
-    throughput = mi.Color3f(1.0)
     if mirrors:
-        ray, si, valid, throughput, chain = _follow_mirrors(scene, ray, si, valid)
-    bsdf = si.bsdf(ray)
-    albedo = bsdf.eval_diffuse_reflectance(si, valid) if (is_jit() or valid) \
-        else mi.Color3f(0.0)
-    albedo = dr.select(valid, throughput * albedo, 0.0)
+        ray, si, valid, _, chain = _follow_mirrors(scene, ray, si, valid)
     mask = mi.UInt32(0)
     for k, light in enumerate(lights):
         if not (is_jit() or valid):
@@ -188,7 +235,7 @@ def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
             blocked = mi.Bool(False) if is_jit() else False
         lit = valid & logical_not(blocked) & (dr.max(spec) > 0.0)
         mask |= dr.select(lit, mi.UInt32(1 << k), mi.UInt32(0))
-    return first, first_valid, albedo, mask, chain
+    return first, first_valid, mask, chain
 
 
 def _path_ids(shape_index: np.ndarray, steps: list, num_shapes: int) -> np.ndarray:
@@ -234,6 +281,26 @@ def _shape_lookup(scene: mi.Scene):
     return {id(s): k + 1 for k, s in enumerate(shapes)}
 
 
+#: Samples per pixel whose first hit gives the albedo (the first ones of each
+#: pixel; all of them when a pixel has fewer), and per pixel of an albedo-only pass.
+ALBEDO_SAMPLES = 4
+
+#: Channels of the image block the samples are developed in: weighted RGB,
+#: alpha, the weight, RGB squared (for the variance), albedo and its weight,
+#: and the count of samples whose radiance was NaN or Inf.
+_CHANNELS = 13
+
+
+@dataclass
+class _Developed:
+    """Per traced pixel, what its samples gave (numpy)."""
+
+    radiance: np.ndarray  # (n, 3) the developed RGB
+    alpha: np.ndarray     # (n,)
+    variance: np.ndarray  # (n, 3) of a single sample's RGB about the pixel's mean
+    albedo: np.ndarray    # (n, 3)
+
+
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True) -> SparseTrace:
@@ -245,74 +312,203 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     integrator : mi.SamplingIntegrator
         The nested integrator (``matte``, ``direct``, ``path``, ...).
     pixel_xy : ndarray of int, shape (n, 2)
-        (column, row) of the pixels to trace, row 0 at the top.
+        (column, row) of the pixels to trace within the film's crop window,
+        row 0 at the top.
     spp : int
-        Samples per traced pixel (averaged, as a box pixel filter does).
+        Samples per traced pixel (>= 1).
     seed : int
         Seed of the sampler.
     aovs : bool
-        Also trace the id AOVs (albedo, shape, visible lights); without
-        them those fields are zero and only the radiance costs time.
+        Also trace the AOVs (albedo, shape, visible lights); without them
+        those fields are zero and only the radiance costs time.
     radiance : bool
         Run the nested integrator; without it the radiance is zero and only
-        the id AOVs cost time (the MRT's cheap full-resolution id pass).
+        the AOVs cost time (the MRT's cheap full-resolution id pass).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
     pixel_xy = np.asarray(pixel_xy, dtype=np.int64)
-    spp = int(spp)
-    if spp < 1:
-        raise MRTError(f"spp must be >= 1, got {spp}")
+    n = len(pixel_xy)
     start = time.perf_counter()
     lights = tracked_lights(scene)
-    lookup = _shape_lookup(scene)
     rule = shadow_rule(scene, lights)
     sampler = sensor.sampler().clone()
-    sampler.set_sample_count(spp)
+    sampler.set_sample_count(int(spp))
     spp = sampler.sample_count()
+    zero = np.zeros(n, np.int64)
     with jit_workers():  # all of Dr.Jit's threads, also inside a reconstruction
-        trace = (_trace_jit if is_jit() else _trace_scalar)(
-            scene, sensor, integrator if radiance else None, sampler, pixel_xy, spp, seed,
-            lights, lookup, aovs, rule)
-    radiance, albedo, shape_index, visible, path_id = trace
+        develop = _develop_jit if is_jit() else _develop_scalar
+        if radiance:
+            samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs)
+        elif aovs:
+            sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
+            samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
+                              seed, True)
+        if aovs:
+            shape_index, visible, path_id = (_ids_jit if is_jit() else _ids_scalar)(
+                scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule)
+        else:
+            shape_index, visible, path_id = zero, np.zeros(n, np.uint32), zero
+    if not (radiance or aovs):
+        samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)))
     curved = curved_mirror_indices(scene) if aovs else np.zeros(0, np.int64)
-    return SparseTrace(radiance, albedo, shape_index, visible, len(lights), spp,
-                       time.perf_counter() - start, shadow_rays=rule == "rays", path_id=path_id,
-                       curved_mirror=np.isin(shape_index, curved) if len(curved) else None)
+    return SparseTrace(samples.radiance if radiance else np.zeros((n, 3)),
+                       samples.albedo if aovs else np.zeros((n, 3)), shape_index, visible,
+                       len(lights), spp, time.perf_counter() - start,
+                       shadow_rays=rule == "rays", path_id=path_id,
+                       curved_mirror=np.isin(shape_index, curved) if len(curved) else None,
+                       alpha=samples.alpha if radiance else None,
+                       variance=samples.variance if radiance else None)
 
 
-def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,
-               rule):
+def _occupancy(pixel_xy: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height * width,) float32: 1 at the traced pixels."""
+    occupied = np.zeros(height * width, dtype=np.float32)
+    occupied[pixel_xy[:, 1] * width + pixel_xy[:, 0]] = 1.0
+    return occupied
+
+
+def _read_block(tensor: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
+    """The developed values of the traced pixels from the block's sums."""
+    sums = np.asarray(tensor, dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+    weight = sums[:, 4:5]
+    safe = np.where(weight != 0.0, weight, 1.0)
+    radiance = np.where(weight != 0.0, sums[:, 0:3] / safe, 0.0)
+    second = np.where(weight != 0.0, sums[:, 5:8] / safe, 0.0)
+    albedo_weight = sums[:, 11:12]
+    albedo = np.where(albedo_weight > 0.0,
+                      sums[:, 8:11] / np.where(albedo_weight > 0.0, albedo_weight, 1.0), 0.0)
+    radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
+    return _Developed(radiance, np.where(weight[:, 0] != 0.0, sums[:, 3] / safe[:, 0], 0.0),
+                      np.maximum(second - radiance ** 2, 0.0), np.clip(albedo, 0.0, 1.0))
+
+
+def _new_block(film) -> mi.ImageBlock:
+    return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
+                         channel_count=_CHANNELS, rfilter=film.rfilter(), border=False)
+
+
+def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):
+    """Trace ``spp`` samples of every pixel in one wavefront and develop them."""
+    film = sensor.film()
+    width, height = (int(v) for v in film.crop_size())
+    table = filter_table(film.rfilter())
     n = len(pixel_xy)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
-    columns, rows = mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1])
-    if integrator is None:
-        radiance = np.zeros((n, 3))
-    elif spp == 1:
-        pixel = mi.Point2f(columns, rows)
-    else:  # lanes pixel-major, as Mitsuba's own render loop lays them out
-        owner = dr.arange(mi.UInt32, n * spp) // spp
-        pixel = mi.Point2f(dr.gather(mi.Float, columns, owner), dr.gather(mi.Float, rows, owner))
-    if integrator is not None:
-        ray, weight = _camera_ray(sensor, sampler, pixel, spp)
-        radiance, _, _ = integrator.sample(scene, sampler, ray, None, True)
-        radiance = mi.Color3f(weight * radiance)
-        # Evaluate once: block_sum reduces each channel on its own, and on an
-        # unevaluated radiance each reduction would re-run the integrator.
-        dr.eval(radiance)
-        if spp > 1:
-            radiance = dr.block_sum(radiance, spp) / spp
-            dr.eval(radiance)
-        radiance = _to_numpy(radiance, n)
-    if not aovs:
-        zero = np.zeros(n, np.int64)
-        return radiance, np.zeros((n, 3)), zero, np.zeros(n, np.uint32), zero
+    lane = dr.arange(mi.UInt32, n * spp)
+    owner = lane // spp  # lanes pixel-major, as Mitsuba's own render loop lays them out
+    cdf, pdf = mi.Float(table.cdf.astype(np.float32)), mi.Float(table.pdf.astype(np.float32))
 
-    ray, _ = _camera_ray(sensor, sampler, mi.Point2f(columns, rows), 1, centre=True)
-    si, valid, albedo, mask, chain = _surface_aovs(scene, ray, lights, rule, has_mirrors(scene))
+    def offset(u):  # inverse CDF of the tabulated |filter|
+        k = dr.binary_search(0, len(table.pdf) - 1,
+                             lambda i: dr.gather(mi.Float, cdf, i + 1) <= u)
+        lo, hi = dr.gather(mi.Float, cdf, k), dr.gather(mi.Float, cdf, k + 1)
+        t = dr.select(hi > lo, (u - lo) / (hi - lo), 0.5)
+        return -table.radius + (mi.Float(k) + t) * table.cell
+
+    def density(t):
+        k = mi.Int32(dr.floor((t + table.radius) / table.cell))
+        inside = (k >= 0) & (k < len(table.pdf))
+        return dr.gather(mi.Float, pdf, mi.UInt32(dr.maximum(k, 0)), inside)
+
+    u = sampler.next_2d()
+    pixel = mi.Point2f(dr.gather(mi.Float, mi.Float(pixel_xy[:, 0]), owner),
+                       dr.gather(mi.Float, mi.Float(pixel_xy[:, 1]), owner))
+    position = pixel + 0.5 + mi.Point2f(offset(u.x), offset(u.y))
+    active = mi.Bool(True) if film.sample_border() else (
+        (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
+    # the density of all of this trace's samples at each sample's position
+    occupied = mi.Float(_occupancy(pixel_xy, width, height))
+    reach = int(np.ceil(table.radius - 0.5))
+    base_x, base_y = mi.Int32(dr.floor(position.x)), mi.Int32(dr.floor(position.y))
+    rho = mi.Float(0.0)
+    for oy in range(-reach, reach + 1):
+        for ox in range(-reach, reach + 1):
+            qx, qy = base_x + ox, base_y + oy
+            ok = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
+            there = dr.gather(mi.Float, occupied, mi.UInt32(dr.maximum(qy * width + qx, 0)), ok)
+            rho += there * density(position.x - (mi.Float(qx) + 0.5)) \
+                * density(position.y - (mi.Float(qy) + 0.5))
+    active &= rho > 0.0
+    weight = dr.select(active, dr.rcp(rho * spp), 0.0)
+
+    ray, ray_weight = _camera_ray(sensor, sampler, position, spp)
+    zero = mi.Float(0.0)
+    rgb, alpha, invalid = mi.Color3f(0.0), zero, zero
+    if integrator is not None:
+        value, valid, _ = integrator.sample(scene, sampler, ray, None, active)
+        rgb = _rgb(ray_weight * value, ray.wavelengths, active)
+        finite = dr.all(dr.isfinite(rgb))
+        invalid = dr.select(active & ~finite, 1.0, 0.0)
+        rgb = dr.select(active & finite, rgb, 0.0)
+        alpha = dr.select(active & valid, 1.0, 0.0)
+    a_weight, a_rgb = zero, mi.Color3f(0.0)
+    if albedo:
+        first = active & ((lane % spp) < min(spp, ALBEDO_SAMPLES))
+        a_rgb = _directional_albedo(scene, sampler, ray, first)
+        a_weight = dr.select(first, weight, 0.0)
+    block = _new_block(film)
+    block.put(position + mi.ScalarVector2f(film.crop_offset()),
+              [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
+               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
+               a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid],
+              active)
+    return _read_block(block.tensor().numpy(), pixel_xy)
+
+
+def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):
+    """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
+    film = sensor.film()
+    width, height = (int(v) for v in film.crop_size())
+    table = filter_table(film.rfilter())
+    occupied = _occupancy(pixel_xy, width, height).reshape(height, width)
+    reach = int(np.ceil(table.radius - 0.5))
+    offset = mi.ScalarVector2f(film.crop_offset())
+    block = _new_block(film)
+    for k, (x, y) in enumerate(pixel_xy.tolist()):
+        sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
+        for s in range(spp):
+            u = sampler.next_2d()
+            px = x + 0.5 + float(table.sample(np.array([u[0]]))[0])
+            py = y + 0.5 + float(table.sample(np.array([u[1]]))[0])
+            inside = film.sample_border() or (0 <= px < width and 0 <= py < height)
+            rho = 0.0
+            for qy in range(int(np.floor(py)) - reach, int(np.floor(py)) + reach + 1):
+                for qx in range(int(np.floor(px)) - reach, int(np.floor(px)) + reach + 1):
+                    if 0 <= qx < width and 0 <= qy < height and occupied[qy, qx]:
+                        rho += float(table.density(px - qx - 0.5) * table.density(py - qy - 0.5))
+            if not (inside and rho > 0.0):
+                sampler.advance()
+                continue
+            weight = 1.0 / (rho * spp)
+            ray, ray_weight = _camera_ray(sensor, sampler, mi.Point2f(px, py), spp)
+            rgb, alpha, invalid = np.zeros(3), 0.0, 0.0
+            if integrator is not None:
+                value, valid, _ = integrator.sample(scene, sampler, ray, None, True)
+                rgb = np.asarray(_rgb(ray_weight * value, ray.wavelengths), dtype=np.float64)
+                alpha = 1.0 if valid else 0.0
+                if not np.isfinite(rgb).all():
+                    rgb, invalid = np.zeros(3), 1.0
+            a_rgb, a_weight = np.zeros(3), 0.0
+            if albedo and s < ALBEDO_SAMPLES:
+                a_rgb = np.asarray(_directional_albedo(scene, sampler, ray, True), np.float64)
+                a_weight = weight
+            values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
+                                     a_weight * a_rgb, [a_weight, invalid]])
+            block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
+            sampler.advance()
+    return _read_block(np.array(block.tensor()), pixel_xy)
+
+
+def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
+    """Shape, visible lights and mirror chain of every pixel's centre ray."""
+    n = len(pixel_xy)
+    position = mi.Point2f(mi.Float(pixel_xy[:, 0]) + 0.5, mi.Float(pixel_xy[:, 1]) + 0.5)
+    ray, _ = _camera_ray(sensor, sampler, position, 1, centre=True)
+    si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, has_mirrors(scene))
     pointers = dr.reinterpret_array(mi.UInt32, si.shape)
-    dr.eval(albedo, mask, pointers, chain)
+    dr.eval(mask, pointers, chain)
     keys, indices = lookup
 
     def to_index(ptr):
@@ -326,36 +522,23 @@ def _trace_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, 
     steps = [np.where(_to_numpy(bounced, n).astype(bool),
                       np.where(to_index(ptr) > 0, to_index(ptr), len(keys) + 1), 0)
              for bounced, ptr in chain]
-    return (radiance, _to_numpy(albedo, n), shape_index,
-            _to_numpy(mask, n).astype(np.uint32), _path_ids(shape_index, steps, len(keys)))
+    return (shape_index, _to_numpy(mask, n).astype(np.uint32),
+            _path_ids(shape_index, steps, len(keys)))
 
 
-def _trace_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, lights, lookup, aovs,
-                  rule):
+def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
+    """The scalar variant's :func:`_ids_jit`, pixel by pixel."""
     n = len(pixel_xy)
-    radiance = np.zeros((n, 3))
-    albedo = np.zeros((n, 3))
     shape_index = np.zeros(n, dtype=np.int64)
     visible = np.zeros(n, dtype=np.uint32)
     mirrors = has_mirrors(scene)
     steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
     for k, (x, y) in enumerate(pixel_xy.tolist()):
-        sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
-        pixel = mi.Point2f(x, y)
-        for _ in range(spp if integrator is not None else 0):
-            ray, weight = _camera_ray(sensor, sampler, pixel, spp)
-            value, _, _ = integrator.sample(scene, sampler, ray, None, True)
-            radiance[k] += np.asarray(weight * value, dtype=np.float64)
-            sampler.advance()
-        if not aovs:
-            continue
-        ray, _ = _camera_ray(sensor, sampler, pixel, 1, centre=True)
-        si, valid, alb, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
+        ray, _ = _camera_ray(sensor, sampler, mi.Point2f(x + 0.5, y + 0.5), 1, centre=True)
+        si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
         if valid:
-            albedo[k] = np.asarray(alb, dtype=np.float64)
             shape_index[k] = lookup.get(id(si.shape), 0)
             visible[k] = int(mask)
             for b, (_, shape) in enumerate(chain):
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
-    return (radiance / spp, albedo, shape_index, visible,
-            _path_ids(shape_index, steps, len(lookup)))
+    return shape_index, visible, _path_ids(shape_index, steps, len(lookup))

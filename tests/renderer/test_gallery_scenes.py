@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 GALLERY = ROOT / "scenes_xml" / "gallery"
 SCENE_FILES = sorted(GALLERY.glob("*.xml"))
 

@@ -1,0 +1,100 @@
+"""Sampling a film's reconstruction filter, so a traced pixel is mi.render's pixel.
+
+``mi.render`` takes samples uniformly over every pixel and splats each one
+into the pixels around it with the film's filter ``f`` (Mitsuba's default
+``gaussian`` reaches two pixels): a pixel's expected value is the
+filter-weighted mean of the radiance around its centre,
+``∫ f(x - c) L(x) dx / ∫ f(x - c) dx``.  The MRT traces only some pixels,
+so it places each traced pixel's samples around its centre with density
+proportional to ``|f|`` (a tabulated, separable distribution), splats them
+with the same filter, and weights each sample by ``1 / rho(x)``, where
+``rho`` is the density of all the samples of that trace at ``x``.  The
+expectation is then ``mi.render``'s for any set of traced pixels; when
+every pixel is traced, ``rho`` is nearly constant and the estimate is
+``mi.render``'s own.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Cells of the tabulated filter distribution over [-radius, radius].
+TABLE_CELLS = 512
+
+
+@dataclass(frozen=True)
+class FilterTable:
+    """The piecewise-constant distribution of ``|f|`` along one axis.
+
+    Attributes
+    ----------
+    radius : float
+        The filter's radius in pixels.
+    cdf : ndarray, shape (TABLE_CELLS + 1,)
+        Cumulative mass at the cell boundaries, 0 to 1.
+    pdf : ndarray, shape (TABLE_CELLS,)
+        Density (per pixel) in each cell.
+    """
+
+    radius: float
+    cdf: np.ndarray
+    pdf: np.ndarray
+
+    @property
+    def cell(self) -> float:
+        """Width of a cell in pixels."""
+        return 2.0 * self.radius / (len(self.cdf) - 1)
+
+    def sample(self, u: np.ndarray) -> np.ndarray:
+        """Offsets from the pixel centre for uniform numbers ``u`` (numpy).
+
+        Examples
+        --------
+        >>> t = FilterTable.from_values(0.5, np.ones(4))
+        >>> t.sample(np.array([0.0, 0.5, 0.999])).round(3).tolist()
+        [-0.5, 0.0, 0.499]
+        """
+        k = np.clip(np.searchsorted(self.cdf, u, side="right") - 1, 0, len(self.pdf) - 1)
+        mass = self.cdf[k + 1] - self.cdf[k]
+        inside = np.where(mass > 0, (u - self.cdf[k]) / np.where(mass > 0, mass, 1.0), 0.5)
+        return -self.radius + (k + inside) * self.cell
+
+    def density(self, offset: np.ndarray) -> np.ndarray:
+        """The distribution's density at ``offset`` (0 outside the radius; numpy)."""
+        k = np.floor((np.asarray(offset) + self.radius) / self.cell).astype(np.int64)
+        inside = (k >= 0) & (k < len(self.pdf))
+        return np.where(inside, self.pdf[np.clip(k, 0, len(self.pdf) - 1)], 0.0)
+
+    @classmethod
+    def from_values(cls, radius: float, values: np.ndarray) -> "FilterTable":
+        """The table of filter values at the cell centres."""
+        mass = np.abs(np.asarray(values, dtype=np.float64))
+        if not mass.sum() > 0:
+            mass = np.ones_like(mass)
+        cdf = np.concatenate([[0.0], np.cumsum(mass)]) / mass.sum()
+        cdf[-1] = 1.0
+        pdf = (mass / mass.sum()) / (2.0 * radius / len(mass))
+        return cls(float(radius), cdf, pdf)
+
+
+#: Tables already made, by the filter's description (its type and parameters).
+_TABLES: dict[str, FilterTable] = {}
+
+
+def filter_table(rfilter) -> FilterTable:
+    """The :class:`FilterTable` of a Mitsuba reconstruction filter."""
+    key = str(rfilter)
+    if key not in _TABLES:
+        radius = float(rfilter.radius())
+        centres = -radius + (np.arange(TABLE_CELLS) + 0.5) * (2.0 * radius / TABLE_CELLS)
+        values = [np.asarray(rfilter.eval(float(x))).ravel()[0] for x in centres]
+        _TABLES[key] = FilterTable.from_values(radius, np.array(values))
+    return _TABLES[key]
+
+
+def window(radius: float) -> int:
+    """Pixels either side of a sample's pixel whose centre its filter can reach."""
+    return int(math.ceil(radius + 0.5))
