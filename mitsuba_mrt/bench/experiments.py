@@ -853,7 +853,7 @@ def _scenes_dir(scenes_dir=None) -> Path:
     if scenes_dir is not None:
         path = Path(scenes_dir)
     else:
-        path = Path(__file__).resolve().parent.parent / "scenes_xml"
+        path = Path(__file__).resolve().parents[2] / "scenes_xml"
     if not (path / "paper_fig1.xml").is_file():
         raise MRTError(f"the report's scenes are not in {path}: pass --scenes DIR "
                        "(the repository's scenes_xml folder)")
