@@ -5,7 +5,8 @@ file with its ``<default>`` values and spp (loaded once, its full render
 shared), and holds one or more :class:`Setting` s, the MRT parameters to try
 on it. Every experiment sweeps one parameter of the report (its Figs. 6-10)
 or, for ``tradeoff``, shows every method and setting as a (time, error)
-point.
+point; ``gallery`` runs every mode on ordinary Mitsuba scenes
+(``scenes_xml/gallery``) with their own parameters.
 
 Methods, by name: ``full`` (the plain Mitsuba render with the same
 integrator and spp, the reference: relative time 1), ``mrt-<mode>`` for each
@@ -27,7 +28,7 @@ import numpy as np
 from ..errors import MRTError
 
 #: The experiments, in the order ``all`` runs them.
-EXPERIMENTS = ("fraction", "filter", "pixels", "objects", "lights", "tradeoff")
+EXPERIMENTS = ("fraction", "filter", "pixels", "objects", "lights", "tradeoff", "gallery")
 
 #: Modes that are scene-agnostic upsampling of the grid keep their own names.
 BASELINES = ("nearest", "bicubic")
@@ -41,7 +42,20 @@ AUTO = "mrt-auto"
 
 #: The report's figure each experiment reproduces.
 FIGURES = {"fraction": "Fig. 6", "filter": "Fig. 7", "pixels": "Fig. 8", "objects": "Fig. 9",
-           "lights": "Fig. 10", "tradeoff": "none (a user's choice of setting)"}
+           "lights": "Fig. 10", "tradeoff": "none (a user's choice of setting)",
+           "gallery": "none (ordinary scenes)"}
+
+#: The gallery's scenes: ``scenes_xml/gallery/<name>.xml``, written by
+#: ``tools/make_gallery.py``; each has ``<default>`` s ``res`` and ``spp``.
+GALLERY_SCENES = ("checker_border", "cornell", "crop_rgba", "envmap_objects", "instanced",
+                  "materials", "room", "spot_textures", "two_sensors")
+
+#: The gallery's methods (``full`` besides): every MRT mode a user picks, and
+#: the baseline a user would reach for without the MRT.
+GALLERY_METHODS = ("mrt-auto", "mrt-paper", "mrt-fast", "mrt-refine", "mrt-idpass", "bicubic")
+
+#: The gallery's picture of a scene: reference | these | error map of the first.
+GALLERY_PICTURE = ("mrt-auto", "bicubic")
 
 
 # --------------------------------------------------------------------------- methods
@@ -119,8 +133,15 @@ class Point:
 class Experiment:
     """A sweep: its points, the name of the swept value and the setting drawn in the triptych.
 
-    ``representative`` is (point, setting) of the triptych; ``full_spp_sweep``
-    adds a row for the full render at every spp tried (stochastic points).
+    ``kind`` says how it is reported: ``sweep`` (error and time against the
+    swept value), ``tradeoff`` (time against error) or ``gallery`` (a table
+    per scene and method). ``representative`` is (point, setting) of the
+    triptych; ``pictures``, when given, replaces the triptych with a picture
+    of every point's first setting: reference | these methods | error map
+    of the first one. ``full_spp_sweep`` adds a row for the full render at
+    every spp tried (stochastic points). ``methods`` are the default
+    methods (None: every mode but ``auto``); ``cache_converged`` keeps the
+    converged references on disk, under the output folder, for reruns.
     """
 
     name: str
@@ -131,6 +152,10 @@ class Experiment:
     representative: tuple = (0, 0)
     log_x: bool = False
     full_spp_sweep: bool = False
+    kind: str = "sweep"
+    pictures: tuple = ()
+    methods: tuple | None = None
+    cache_converged: bool = False
 
 
 def _fraction_settings(fractions, sigma=1.0, cutoff=0.05, group=""):
@@ -194,6 +219,8 @@ def build_experiment(name: str, quick: bool = False, res: int | None = None) -> 
         what = "spheres" if name == "objects" else "point lights"
         return Experiment(name, f"MRT against the number of {what} (f = 0.1)", "N",
                           f"number of {what}", points, (len(points) - 1, 0))
+    if name == "gallery":
+        return _gallery(quick, res)
     # tradeoff
     side = res or (64 if quick else 400)
     spp = 4 if quick else 64
@@ -207,4 +234,22 @@ def build_experiment(name: str, quick: bool = False, res: int | None = None) -> 
     ]
     return Experiment(name, "Time against error: every method and setting on the Fig. 1 scene",
                       "sample_fraction", "total time (s)", points,
-                      (0, _closest(fractions, 0.1)), log_x=True, full_spp_sweep=True)
+                      (0, _closest(fractions, 0.1)), log_x=True, full_spp_sweep=True,
+                      kind="tradeoff")
+
+
+def _gallery(quick: bool, res: int | None) -> Experiment:
+    """Every scene of :data:`GALLERY_SCENES` at its own MRT defaults, ``res`` a side."""
+    from ..types import MRTParams
+
+    side = res or (32 if quick else 128)
+    spp = 4 if quick else 64
+    defaults = MRTParams()
+    params = {"sample_fraction": defaults.sample_fraction,
+              "filter_sigma": defaults.filter_sigma, "filter_cutoff": defaults.filter_cutoff}
+    points = [Point(f"gallery/{name}.xml", {"res": side, "spp": spp}, spp,
+                    [Setting(dict(params), label="defaults", group=name)], group=name)
+              for name in GALLERY_SCENES]
+    return Experiment("gallery", "Every mode on ordinary Mitsuba scenes", "scene", "scene",
+                      points, kind="gallery", pictures=GALLERY_PICTURE,
+                      methods=GALLERY_METHODS, cache_converged=True)

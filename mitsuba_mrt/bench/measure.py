@@ -15,12 +15,14 @@ scene is loaded once, and :class:`PointRunner` then
 3. *detects a stochastic integrator* by rendering with a second seed; then
    every row's ``error_converged`` is measured against a *converged
    reference* (the mean of :data:`CONVERGED_FACTOR` full renders with other
-   seeds), and
+   seeds; kept in ``<cache>/<scene>_<res>_<spp>.npy`` when the experiment
+   caches it, ``spp`` being the reference's), and
 4. times the *full render at other spp* (1, 4, 16 ...), for the
    ``full-equal-time`` row of every method: the full render at the spp whose
    median time is closest to that method's;
 5. writes one :class:`MethodRow` per method and setting: the lower median of
-   its totals, with the stage times of that same run.
+   its totals, with the stage times of that same run, and the errors and
+   lowest pixel value of its image.
 
 A method that raises, or returns NaN or Inf, gets a row whose ``status``
 says so; the sweep goes on.
@@ -38,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..app.imageio import atomic_path
 from .experiments import EQUAL_TIME, FULL, Experiment, Point, Setting, available_methods
 
 #: Timed seconds of the full render below which a point gets more rounds.
@@ -174,6 +177,8 @@ class MethodRow:
     """One row of a bench CSV: one method at one setting of one point.
 
     The fields, in order, are the CSV's columns; a number not measured is NaN.
+    ``min_value`` is the lowest value of any channel of the image (below 0:
+    negative radiance, which a full render does not make).
     """
 
     experiment: str = ""
@@ -209,6 +214,7 @@ class MethodRow:
     converged_spp: int | str = ""
     error_converged: float = math.nan
     psnr_converged_db: float = math.nan
+    min_value: float = math.nan
     matched_method: str = ""
     peak_memory_mb: float = math.nan
     memory_delta_mb: float = math.nan
@@ -289,11 +295,12 @@ class PointRunner:
 
     def __init__(self, experiment: Experiment, point: Point, methods: list, repeats: int,
                  scenes_dir: Path, meter: MemoryMeter, env: dict, tick,
-                 min_seconds: float = MIN_TIMED_SECONDS):
+                 min_seconds: float = MIN_TIMED_SECONDS, cache_dir: Path | None = None):
         self.exp, self.point, self.methods = experiment, point, methods
         self.repeats, self.scenes_dir, self.meter, self.env = repeats, scenes_dir, meter, env
         self.tick = tick
         self.min_seconds = min_seconds  # timed seconds of the full render to reach
+        self.cache_dir = cache_dir  # converged references kept here (None: not kept)
         self.modes = available_methods()
         self.mrt_methods = [m for m in methods if m != FULL]
 
@@ -392,6 +399,32 @@ class PointRunner:
         return not np.allclose(second, self.full.image, rtol=0.0, atol=1e-6)
 
     def _converged_reference(self) -> np.ndarray:
+        """The converged reference: from the cache when it holds one of this size."""
+        path = self._cache_path()
+        if path is not None and path.is_file():
+            try:
+                image = np.load(path)
+            except (OSError, ValueError):
+                image = None
+            if (image is not None and image.shape == (self.height, self.width, 3)
+                    and np.isfinite(image).all()):
+                return image
+        image = self._render_converged()
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                np.save(f, image)
+        return image
+
+    def _cache_path(self) -> Path | None:
+        if self.cache_dir is None:
+            return None
+        point = self.point
+        res = point.defines.get("res", self.width)
+        return (Path(self.cache_dir)
+                / f"{Path(point.scene).stem}_{res}_{CONVERGED_FACTOR * point.spp}.npy")
+
+    def _render_converged(self) -> np.ndarray:
         """The mean of CONVERGED_FACTOR full renders with other seeds."""
         return np.mean([self._full(self.point.spp, seed=1000 + k)[0]
                         for k in range(CONVERGED_FACTOR)], axis=0)
@@ -480,7 +513,8 @@ class PointRunner:
                                **extra)
             reference = self.full.image
             out = replace(out, error=_paper_error(runs.image, reference),
-                          psnr_db=_psnr(runs.image, reference))
+                          psnr_db=_psnr(runs.image, reference),
+                          min_value=float(runs.image.min()))
             if self.converged is not None:
                 out = replace(out, error_converged=_paper_error(runs.image, self.converged),
                               psnr_converged_db=_psnr(runs.image, self.converged))

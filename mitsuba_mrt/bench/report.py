@@ -9,8 +9,10 @@ table can be redrawn from a CSV alone:
   (:func:`plot_sweep`); for ``tradeoff``, time against error
   (:func:`plot_tradeoff`);
 - ``<experiment>_triptych.png``: reference | MRT | error map of one setting
-  (:func:`plot_triptych`);
-- ``<experiment>.md``: the tables (:func:`markdown_tables`).
+  (:func:`plot_triptych`); for ``gallery``, ``gallery_<scene>.png``:
+  reference | ``auto`` | ``bicubic`` | error map of ``auto``, per scene;
+- ``<experiment>.md``: the tables (:func:`markdown_tables`); for
+  ``gallery`` one table, a row per scene and method.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import numpy as np
 
 from ..app.imageio import atomic_path, srgb_encode
 from .experiments import BASELINES, EQUAL_TIME, FULL, Experiment
-from .measure import MethodRow
+from .measure import CONVERGED_FACTOR, MethodRow
 
 #: Columns of every CSV, in order: the fields of :class:`MethodRow`.
 CSV_COLUMNS = tuple(f.name for f in fields(MethodRow))
@@ -74,6 +76,13 @@ def _error_of(r) -> float:
     """The error a plot shows: against the converged reference when there is one."""
     conv = _num(r.get("error_converged"))
     return conv if math.isfinite(conv) else _num(r.get("error"))
+
+
+def _psnr_of(r) -> float:
+    """PSNR against the converged reference when there is one, else the full render."""
+    if math.isfinite(_num(r.get("error_converged"))):
+        return _num(r.get("psnr_converged_db"))
+    return _num(r.get("psnr_db"))
 
 
 def _series(rows, experiment_name):
@@ -229,20 +238,25 @@ def plot_tradeoff(rows, path, experiment: Experiment) -> None:
     _save(fig, path)
 
 
-def plot_triptych(path, reference, image, title: str, reference_title="reference") -> None:
-    """Reference | MRT | error map (log10 of the report's per-pixel error)."""
+def plot_triptych(path, reference, image, title: str, reference_title="reference", *,
+                  others=(), error_title="error, log10") -> None:
+    """Reference | MRT | error map of the MRT (log10 of the report's per-pixel error).
+
+    ``others``: more (title, image) panels, drawn between the MRT and its
+    error map.
+    """
     from ..recon.metrics import error_map
 
-    fig = _figure(9.0, 3.3)
-    axes = fig.subplots(1, 3)
-    axes[0].imshow(srgb_encode(reference))
-    axes[0].set_title(reference_title, fontsize=8)
-    axes[1].imshow(srgb_encode(image))
-    axes[1].set_title(title, fontsize=8)
+    panels = [(reference_title, reference), (title, image), *others]
+    fig = _figure(3.0 * (len(panels) + 1), 3.3)
+    axes = fig.subplots(1, len(panels) + 1)
+    for ax, (panel_title, panel) in zip(axes, panels):
+        ax.imshow(srgb_encode(panel))
+        ax.set_title(panel_title, fontsize=8)
     errors = np.log10(np.clip(error_map(image, reference), 1e-4, 1.0))
-    im = axes[2].imshow(errors, vmin=-4, vmax=0, cmap="inferno")
-    axes[2].set_title("error, log10", fontsize=8)
-    fig.colorbar(im, ax=axes[2], fraction=0.046, pad=0.04)
+    im = axes[-1].imshow(errors, vmin=-4, vmax=0, cmap="inferno")
+    axes[-1].set_title(error_title, fontsize=8)
+    fig.colorbar(im, ax=axes[-1], fraction=0.046, pad=0.04)
     for ax in axes:
         ax.set_xticks([]), ax.set_yticks([])
     fig.tight_layout()
@@ -259,70 +273,117 @@ def _md_number(value, digits=4) -> str:
 def markdown_tables(rows, experiment: Experiment) -> str:
     """The experiment's tables as markdown (no heading, no command)."""
     ok = _ok(rows)
-    out = []
+    tables = {"tradeoff": _tradeoff_table, "gallery": _gallery_table}.get(experiment.kind,
+                                                                           _sweep_tables)
+    out = tables(ok, experiment)
     failed = [r for r in rows if r.get("status", "ok") != "ok"]
-    if experiment.name == "tradeoff":
-        stoch = any(r.get("stochastic") in (True, "true") for r in ok)
-        head = ["group", "method", "setting", "spp", "total s", "relative time",
-                "error vs full"] + (["error vs converged", "PSNR vs converged dB"] if stoch
-                                    else ["PSNR dB"])
-        out.append("| " + " | ".join(head) + " |")
-        out.append("|" + " --- |" * len(head))
-        for r in ok:
-            label = r["setting"] + (f" (time of {r['matched_method']})"
-                                    if r["method"] == EQUAL_TIME else "")
-            cells = [r["group"], r["method"], label, r["spp"], _md_number(r["total_s"]),
-                     _md_number(r["relative_time"], 3), _md_number(r["error"])]
-            cells += ([_md_number(r["error_converged"]), _md_number(r["psnr_converged_db"], 4)]
-                      if stoch else [_md_number(r["psnr_db"], 4)])
-            out.append("| " + " | ".join(str(c) for c in cells) + " |")
-    else:
-        lines = _series(ok, experiment.name)
-        xs = sorted({x for pts in lines.values() for x, _ in pts})
-        head = "| method | " + " | ".join(f"{x:g}" for x in xs) + " |"
-        sep = "| --- |" + " ---: |" * len(xs)
-        full = {}
-        for r in ok:
-            if r["method"] == FULL and math.isfinite(_num(r["x"])):
-                full[_num(r["x"])] = r
-        if not full:  # one point, several settings: the full render is shared
-            shared = [r for r in ok if r["method"] == FULL]
-            full = {x: shared[0] for x in xs} if shared else {}
-        for title, column, digits in (
-                (f"Error (the report's metric, against the full render) by {experiment.x_label}",
-                 "error", 4),
-                ("Relative time (median method total / median full render)", "relative_time", 3),
-                ("Relative time of the fastest runs (fewest interruptions: min method total / "
-                 "min full render)", "relative_min", 3),
-                ("Median total time (s)", "total_s", 3)):
-            out += [f"{title}:", "", head, sep]
-            for (method, group), pts in lines.items():
-                by_x = {x: dict(r, relative_min=_num(r.get("total_min_s")) / _num(
-                    (full.get(x) or {}).get("total_min_s"))) for x, r in pts}
-                label = method if not group else f"{method} {group}"
-                out.append(f"| {label} | " + " | ".join(
-                    _md_number(by_x[x][column], digits) if x in by_x else "-" for x in xs) + " |")
-            if column == "total_s" and full:
-                out.append("| full | " + " | ".join(
-                    _md_number(full[x]["total_s"], digits) if x in full else "-" for x in xs)
-                    + " |")
-            out.append("")
-        warm = [r for r in ok if r["method"] != EQUAL_TIME]
-        if warm:
-            first_scene = warm[0].get("scene"), warm[0].get("defines")
-            seen = {}
-            for r in warm:
-                if (r.get("scene"), r.get("defines")) == first_scene and r["method"] not in seen:
-                    seen[r["method"]] = (r.get("warmup_s"), r["total_s"])
-            out.append("First call at the first point (kernel compilation included; excluded "
-                       "from the medians above), s: " + ", ".join(
-                           f"{m} {_md_number(w, 3)} (then {_md_number(t, 3)})"
-                           for m, (w, t) in seen.items()) + ".")
     if failed:
+        where = "group" if experiment.kind == "gallery" else "setting"
         out.append("")
-        out.append("Failed runs: " + "; ".join(f"{r['method']} {r['setting']}: {r['status']}"
+        out.append("Failed runs: " + "; ".join(f"{r['method']} {r[where]}: {r['status']}"
                                                for r in failed))
     return "\n".join(out).rstrip() + "\n"
+
+
+def _tradeoff_table(ok, experiment: Experiment) -> list:
+    """One row per method and setting: time, error against the full render and the
+    converged reference."""
+    out = []
+    stoch = any(r.get("stochastic") in (True, "true") for r in ok)
+    head = ["group", "method", "setting", "spp", "total s", "relative time",
+            "error vs full"] + (["error vs converged", "PSNR vs converged dB"] if stoch
+                                else ["PSNR dB"])
+    out.append("| " + " | ".join(head) + " |")
+    out.append("|" + " --- |" * len(head))
+    for r in ok:
+        label = r["setting"] + (f" (time of {r['matched_method']})"
+                                if r["method"] == EQUAL_TIME else "")
+        cells = [r["group"], r["method"], label, r["spp"], _md_number(r["total_s"]),
+                 _md_number(r["relative_time"], 3), _md_number(r["error"])]
+        cells += ([_md_number(r["error_converged"]), _md_number(r["psnr_converged_db"], 4)]
+                  if stoch else [_md_number(r["psnr_db"], 4)])
+        out.append("| " + " | ".join(str(c) for c in cells) + " |")
+    return out
+
+
+def _sweep_tables(ok, experiment: Experiment) -> list:
+    """A table per measure (error, relative time, ...): a row per method, a column per x."""
+    out = []
+    lines = _series(ok, experiment.name)
+    xs = sorted({x for pts in lines.values() for x, _ in pts})
+    head = "| method | " + " | ".join(f"{x:g}" for x in xs) + " |"
+    sep = "| --- |" + " ---: |" * len(xs)
+    full = {}
+    for r in ok:
+        if r["method"] == FULL and math.isfinite(_num(r["x"])):
+            full[_num(r["x"])] = r
+    if not full:  # one point, several settings: the full render is shared
+        shared = [r for r in ok if r["method"] == FULL]
+        full = {x: shared[0] for x in xs} if shared else {}
+    for title, column, digits in (
+            (f"Error (the report's metric, against the full render) by {experiment.x_label}",
+             "error", 4),
+            ("Relative time (median method total / median full render)", "relative_time", 3),
+            ("Relative time of the fastest runs (fewest interruptions: min method total / "
+             "min full render)", "relative_min", 3),
+            ("Median total time (s)", "total_s", 3)):
+        out += [f"{title}:", "", head, sep]
+        for (method, group), pts in lines.items():
+            by_x = {x: dict(r, relative_min=_num(r.get("total_min_s")) / _num(
+                (full.get(x) or {}).get("total_min_s"))) for x, r in pts}
+            label = method if not group else f"{method} {group}"
+            out.append(f"| {label} | " + " | ".join(
+                _md_number(by_x[x][column], digits) if x in by_x else "-" for x in xs) + " |")
+        if column == "total_s" and full:
+            out.append("| full | " + " | ".join(
+                _md_number(full[x]["total_s"], digits) if x in full else "-" for x in xs)
+                + " |")
+        out.append("")
+    warm = [r for r in ok if r["method"] != EQUAL_TIME]
+    if warm:
+        first_scene = warm[0].get("scene"), warm[0].get("defines")
+        seen = {}
+        for r in warm:
+            if (r.get("scene"), r.get("defines")) == first_scene and r["method"] not in seen:
+                seen[r["method"]] = (r.get("warmup_s"), r["total_s"])
+        out.append("First call at the first point (kernel compilation included; excluded "
+                   "from the medians above), s: " + ", ".join(
+                       f"{m} {_md_number(w, 3)} (then {_md_number(t, 3)})"
+                       for m, (w, t) in seen.items()) + ".")
+    return out
+
+
+def _gallery_table(ok, experiment: Experiment) -> list:
+    """One table, a row per scene and method, and the methods that made a pixel below 0
+    where the full render has none."""
+    out = [f"Error (the report's metric) and PSNR against the converged reference (the mean "
+           f"of {CONVERGED_FACTOR} full renders, {CONVERGED_FACTOR}x the spp) where the "
+           "integrator is stochastic, else against the full render; relative time: median "
+           "method total / median full render; min value: the lowest channel value of the "
+           "image.", ""]
+    head = ["scene", "method", "spp", "relative time", "error", "PSNR dB", "min value"]
+    out.append("| " + " | ".join(head) + " |")
+    out.append("| --- | --- |" + " ---: |" * (len(head) - 2))
+    for r in ok:
+        method = r["method"] + (f" (time of {r['matched_method']})"
+                                if r["method"] == EQUAL_TIME else "")
+        cells = [r["group"], method, r["spp"], _md_number(r["relative_time"], 3),
+                 _md_number(_error_of(r)), _md_number(_psnr_of(r), 4),
+                 _md_number(r.get("min_value"), 3)]
+        out.append("| " + " | ".join(str(c) for c in cells) + " |")
+    negative = []
+    for scene in dict.fromkeys(r["group"] for r in ok):
+        rows = [r for r in ok if r["group"] == scene]
+        full = [r for r in rows if r["method"] == FULL]
+        if not full or not _num(full[0].get("min_value")) >= 0:
+            continue
+        below = [f"{r['method']} ({_md_number(r['min_value'], 3)})" for r in rows
+                 if r["method"] not in (FULL, EQUAL_TIME) and _num(r.get("min_value")) < 0]
+        if below:
+            negative.append(f"{scene}: " + ", ".join(below))
+    out += ["", "Pixels below 0 where the full render has none: "
+            + ("; ".join(negative) if negative else "none") + "."]
+    return out
 
 
 def environment_line(env: dict) -> str:

@@ -3,8 +3,9 @@
 :func:`run_experiment` builds the experiment (:mod:`.experiments`),
 measures its points one after the other (:mod:`.measure`), rewriting the
 CSV after every point so that a crash keeps what was measured, and then
-writes the plot, the triptych and the markdown tables (:mod:`.report`)
-into the output folder, each file atomically.
+writes the plot, the triptych (or, for ``gallery``, a picture per scene)
+and the markdown tables (:mod:`.report`) into the output folder, each file
+atomically.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import os
 import shlex
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..app.imageio import atomic_path
@@ -23,21 +24,29 @@ from .measure import CONVERGED_FACTOR, MIN_TIMED_SECONDS, MemoryMeter, PointRunn
 from .report import (environment_line, markdown_tables, plot_sweep, plot_tradeoff,
                      plot_triptych, read_csv, write_csv)
 
+#: The subfolder of the output folder that keeps converged references.
+CACHE_DIR = "cache"
+
 
 @dataclass
 class ExperimentResult:
-    """What one experiment wrote: its rows (as the CSV holds them) and files."""
+    """What one experiment wrote: its rows (as the CSV holds them) and files.
+
+    ``png`` is the plot (None for ``gallery``), ``triptych`` the picture of
+    the representative setting, ``pictures`` those of every point.
+    """
 
     rows: list
     csv: Path
-    png: Path
+    png: Path | None
     triptych: Path | None
     md: Path
     seconds: float
+    pictures: list = field(default_factory=list)
 
     @property
     def files(self) -> list:
-        return [self.csv, self.png, self.md] + ([self.triptych] if self.triptych else [])
+        return [f for f in (self.csv, self.png, self.md, self.triptych) if f] + self.pictures
 
 
 def _scenes_dir(scenes_dir=None) -> Path:
@@ -76,7 +85,9 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     variant : str
         Mitsuba variant (``auto``: LLVM when usable).
     methods : list or comma-separated str, optional
-        Method names (``mrt-paper``, ``nearest``...); default all, ``full`` always.
+        Method names (``mrt-paper``, ``nearest``...); default the experiment's
+        (every mode but ``auto``; for ``gallery`` every mode and ``bicubic``);
+        ``full`` always.
     res : int, optional
         Image side for every experiment but ``pixels``.
     scenes_dir : path, optional
@@ -108,7 +119,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     from ..renderer.variants import activate, environment
 
     variant = activate(variant)
-    method_list = resolve_methods(methods)
+    method_list = resolve_methods(methods if methods is not None else experiment.methods)
     scenes = _scenes_dir(scenes_dir)
     for point in experiment.points:
         if not (scenes / point.scene).is_file():
@@ -130,24 +141,34 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     started = time.perf_counter()
     per_point = [(1 + len(p.settings) * (len(method_list) - 1)) * (repeats + 1) + 1
                  for p in experiment.points]
-    rows, images = [], None
+    rows, images, pictures = [], None, []
     csv_path = out / f"{name}.csv"
     rep_point, rep_setting = experiment.representative
+    cache = out / CACHE_DIR if experiment.cache_converged else None
     with _progress(sum(per_point), name, progress) as bar:
         for k, point in enumerate(experiment.points):
             bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px", refresh=False)
             runner = PointRunner(experiment, point, method_list, repeats, scenes, meter, env,
-                                 lambda: bar.update(1), 0.0 if quick else MIN_TIMED_SECONDS)
-            point_rows, point_images = runner.run(rep_setting if k == rep_point else None)
+                                 lambda: bar.update(1), 0.0 if quick else MIN_TIMED_SECONDS,
+                                 cache_dir=cache)
+            keep = 0 if experiment.pictures else (rep_setting if k == rep_point else None)
+            point_rows, point_images = runner.run(keep)
             rows += point_rows
-            if point_images is not None:
-                images = (point_images, point, point.settings[rep_setting])
             write_csv(csv_path, rows)  # after every point: a crash keeps what was measured
+            if experiment.pictures:
+                picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
+                                   point_images, point, experiment.pictures)
+                pictures += [picture] if picture else []
+            elif point_images is not None:
+                images = (point_images, point, point.settings[rep_setting])
     seconds = time.perf_counter() - started
 
-    png = out / f"{name}.png"
     text_rows = read_csv(csv_path)
-    (plot_tradeoff if name == "tradeoff" else plot_sweep)(text_rows, png, experiment)
+    png = None
+    if experiment.kind != "gallery":
+        png = out / f"{name}.png"
+        (plot_tradeoff if experiment.kind == "tradeoff" else plot_sweep)(text_rows, png,
+                                                                         experiment)
     triptych = None
     if images is not None:
         triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
@@ -160,7 +181,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
             + markdown_tables(text_rows, experiment))
     with atomic_path(md) as tmp:
         Path(tmp).write_text(text)
-    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds)}
+    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
 
 
 def _triptych(path, rows, images, point, setting):
@@ -175,11 +196,37 @@ def _triptych(path, rows, images, point, setting):
     if not mrt:
         return None
     best = min(mrt, key=lambda r: r.shown_error)
-    ref_title = (f"converged reference ({CONVERGED_FACTOR * point.spp} spp)"
-                 if images.converged else f"full render ({point.spp} spp)")
     plot_triptych(path, images.reference, images.methods[best.method],
                   f"{best.method}, {setting.label}: error {best.shown_error:.4f}, "
-                  f"time x{best.relative_time:.2f}", ref_title)
+                  f"time x{best.relative_time:.2f}", _reference_title(images, point))
+    return path
+
+
+def _reference_title(images, point) -> str:
+    return (f"converged reference ({CONVERGED_FACTOR * point.spp} spp)"
+            if images.converged else f"full render ({point.spp} spp)")
+
+
+def _picture(path, rows, images, point, methods):
+    """Reference | each of ``methods`` that has an image | error map of the first of them;
+    None if none has."""
+    shown = [m for m in methods if m in images.methods]
+    if not shown:
+        return None
+    by_method = {r.method: r for r in rows if r.ok and r.setting == point.settings[0].label}
+    panels = []
+    for m in shown:
+        title = m
+        mode, used = m.removeprefix("mrt-"), images.modes_used.get(m, "")
+        if used and used != mode:
+            title += f" (ran {used})"
+        r = by_method.get(m)
+        if r is not None:
+            title += f"\nerror {r.shown_error:.4f}, time x{r.relative_time:.2f}"
+        panels.append((title, images.methods[m]))
+    (title, image), others = panels[0], panels[1:]
+    plot_triptych(path, images.reference, image, title, _reference_title(images, point),
+                  others=others, error_title=f"error of {shown[0]}, log10")
     return path
 
 

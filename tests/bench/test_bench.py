@@ -186,3 +186,55 @@ def test_a_broken_mode_is_reported_not_fatal(tmp_path, monkeypatch):
     assert status["mrt-bench_nan"] == "failed: 1 pixels of the image are NaN or Inf"
     assert status["mrt-bench_raise"] == "failed: RuntimeError: boom"
     assert "Failed runs" in (tmp_path / "objects.md").read_text()
+
+
+def test_gallery_lists_every_scene_of_the_folder():
+    on_disk = {p.stem for p in (SCENES / "gallery").glob("*.xml")}
+    assert set(experiments.GALLERY_SCENES) == on_disk
+    gallery = experiments.build_experiment("gallery")
+    assert [p.defines for p in gallery.points][0] == {"res": 128, "spp": 64}
+    assert experiments.build_experiment("gallery", quick=True).points[0].defines["res"] == 32
+
+
+def test_quick_gallery_has_every_method_and_reuses_the_converged_reference(tmp_path,
+                                                                           monkeypatch):
+    scenes = ("spot_textures", "two_sensors")
+    monkeypatch.setattr(experiments, "GALLERY_SCENES", scenes)
+    argv = ["bench", "gallery", "--quick", "--res", "24", "-o", str(tmp_path),
+            "--scenes", str(SCENES), "--no-progress"]
+    assert main(argv) == 0
+    rows = report.read_csv(tmp_path / "gallery.csv")
+    assert tuple(rows[0]) == report.CSV_COLUMNS and "min_value" in rows[0]
+    for scene in scenes:
+        mine = [r for r in rows if r["scene"] == f"gallery/{scene}.xml"]
+        assert {r["method"] for r in mine} == {"full", "full-equal-time",
+                                               *experiments.GALLERY_METHODS}
+        assert {r["matched_method"] for r in mine if r["method"] == "full-equal-time"} == set(
+            experiments.GALLERY_METHODS)
+        for r in mine:
+            assert r["status"] == "ok", (scene, r["method"], r["status"])
+            assert r["stochastic"] == "true" and int(r["converged_spp"]) == 64
+            assert int(r["width"]) == int(r["height"]) == 24
+            for column in ("relative_time", "error_converged", "psnr_converged_db", "min_value"):
+                assert math.isfinite(float(r[column])), (scene, r["method"], column)
+        full = next(r for r in mine if r["method"] == "full")
+        assert float(full["relative_time"]) == 1.0 and float(full["min_value"]) >= 0
+        assert (tmp_path / f"gallery_{scene}.png").read_bytes()[:4] == b"\x89PNG"
+        assert (tmp_path / "cache" / f"{scene}_24_64.npy").is_file()
+    assert not (tmp_path / "gallery.png").exists()
+    md = (tmp_path / "gallery.md").read_text()
+    assert md.startswith("Command: `python -m mitsuba_mrt bench gallery --quick")
+    assert "| spot_textures | mrt-auto |" in md and "Pixels below 0 where" in md
+
+    cached = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "cache").iterdir()}
+    assert sorted(cached) == [f"{scene}_24_64.npy" for scene in scenes]
+
+    def render_again(self):
+        raise AssertionError("the converged reference was rendered again")
+
+    monkeypatch.setattr(measure.PointRunner, "_render_converged", render_again)
+    assert main(argv + ["--methods", "bicubic"]) == 0
+    rerun = report.read_csv(tmp_path / "gallery.csv")
+    assert {r["method"] for r in rerun} == {"full", "bicubic", "full-equal-time"}
+    assert all(math.isfinite(float(r["error_converged"])) for r in rerun)
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "cache").iterdir()} == cached
