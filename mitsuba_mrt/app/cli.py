@@ -103,9 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Mitsuba variant; auto: LLVM if libLLVM >= 17, else scalar")
     b.add_argument("--methods", default=None, metavar="A,B,...",
                    help="comma list of methods (full, mrt-<mode>, nearest, bicubic); "
-                        "default: full and every mode but auto (gallery: auto, paper, fast, refine, "
-                        "idpass and bicubic); "
-                        "full always runs")
+                        "default: full and every mode but auto (gallery: auto, paper, fast, "
+                        "refine, idpass and bicubic); full always runs")
     b.add_argument("--res", type=int, default=None,
                    help="image side for every experiment but pixels "
                         "(default 200, tradeoff 400, gallery 128; --quick 64, gallery 32)")

@@ -100,7 +100,8 @@ def test_every_experiment_has_the_report_sweep():
     assert len(filt) == 20 and {s.params["filter_sigma"] for s in filt} == {1, 2, 4, 8}
     assert [p.defines["res"] for p in experiments.build_experiment("pixels").points] == list(
         range(200, 1201, 100))
-    assert [p.scene for p in experiments.build_experiment("objects").points][-1] == "paper_objects_10.xml"
+    objects = experiments.build_experiment("objects").points
+    assert [p.scene for p in objects][-1] == "paper_objects_10.xml"
     assert len(experiments.build_experiment("lights").points) == 10
     trade = experiments.build_experiment("tradeoff")
     assert trade.points[0].defines == {"res": 400, "integrator": "path", "spp": 64,
@@ -125,7 +126,8 @@ def test_plots_run_headless_on_synthetic_rows(tmp_path):
                          "sample_fraction": str(x), "setting": f"f={x}"})
     exp = experiments.build_experiment("fraction", quick=True)
     report.plot_sweep(rows, tmp_path / "a.png", exp)
-    report.plot_tradeoff(rows, tmp_path / "b.png", experiments.build_experiment("tradeoff", quick=True))
+    report.plot_tradeoff(rows, tmp_path / "b.png",
+                         experiments.build_experiment("tradeoff", quick=True))
     image = np.full((8, 8, 3), 0.5)
     report.plot_triptych(tmp_path / "c.png", image, image * 0.9, "mrt-paper")
     for name in ("a.png", "b.png", "c.png"):
