@@ -90,7 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="the report's experiments: MRT against the full render "
                        "and the baselines (CSV, plots, markdown tables)")
     b.add_argument("experiment", choices=(*EXPERIMENTS, "all"),
-                   help="which experiment (all: every one, into the same folder)")
+                   help="which experiment (gallery: every mode on the ordinary scenes of "
+                        "scenes_xml/gallery; all: every one, into the same folder)")
     b.add_argument("-o", "--output", default="out/bench",
                    help="output folder (default %(default)s)")
     b.add_argument("--quick", action="store_true",
@@ -102,10 +103,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Mitsuba variant; auto: LLVM if libLLVM >= 17, else scalar")
     b.add_argument("--methods", default=None, metavar="A,B,...",
                    help="comma list of methods (full, mrt-<mode>, nearest, bicubic); "
-                        "default: full and every mode; full always runs")
+                        "default: full and every mode but auto (gallery: auto, paper, fast, "
+                        "refine, idpass and bicubic); full always runs")
     b.add_argument("--res", type=int, default=None,
                    help="image side for every experiment but pixels "
-                        "(default 200, tradeoff 400; --quick 64)")
+                        "(default 200, tradeoff 400, gallery 128; --quick 64, gallery 32)")
     b.add_argument("--scenes", default=None, metavar="DIR",
                    help="folder of the report's scenes (default: the repository's scenes_xml)")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")

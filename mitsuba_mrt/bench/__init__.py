@@ -1,5 +1,13 @@
-"""The ``bench`` command: the report's experiments, MRT against the alternatives."""
+"""The ``bench`` command: the report's experiments, MRT against the alternatives.
 
-from .experiments import EXPERIMENTS, run_experiment, summary_line
+- :mod:`.experiments`: what each experiment sweeps (points, settings, methods);
+- :mod:`.measure`: how one point is measured (warm-up, alternating timed
+  rounds, converged reference, equal-time full renders) into CSV rows;
+- :mod:`.report`: the CSV, plots, pictures and markdown tables;
+- :mod:`.run`: one experiment end to end (:func:`run_experiment`).
+"""
 
-__all__ = ["EXPERIMENTS", "run_experiment", "summary_line"]
+from .experiments import EXPERIMENTS
+from .run import ExperimentResult, run_experiment, summary_line
+
+__all__ = ["EXPERIMENTS", "ExperimentResult", "run_experiment", "summary_line"]

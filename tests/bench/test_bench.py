@@ -4,8 +4,9 @@ import math
 
 import pytest
 
-from mitsuba_mrt.bench import experiments as bench
+from mitsuba_mrt.bench import experiments, measure, report, run_experiment
 from mitsuba_mrt.app.cli import main
+from mitsuba_mrt.errors import MRTError
 from mitsuba_mrt.modes import MODES
 from mitsuba_mrt.modes.paper import paper_reconstruct
 
@@ -21,21 +22,21 @@ REQUIRED = ("experiment", "scene", "method", "sample_fraction", "filter_sigma", 
 @pytest.fixture(scope="module")
 def quick_fraction(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
-    result = bench.run_experiment("fraction", out, quick=True, progress=False,
-                                  scenes_dir=SCENES)["fraction"]
+    result = run_experiment("fraction", out, quick=True, progress=False,
+                            scenes_dir=SCENES)["fraction"]
     return out, result
 
 
 def test_quick_fraction_writes_csv_plots_and_table(quick_fraction):
     out, result = quick_fraction
-    rows = bench.read_csv(out / "fraction.csv")
-    assert rows and set(REQUIRED) <= set(rows[0]) and tuple(rows[0]) == bench.CSV_COLUMNS
+    rows = report.read_csv(out / "fraction.csv")
+    assert rows and set(REQUIRED) <= set(rows[0]) and tuple(rows[0]) == report.CSV_COLUMNS
     methods = {r["method"] for r in rows}
-    assert methods == set(bench.resolve_methods())
+    assert methods == set(experiments.resolve_methods())
     assert {"full", "mrt-paper", "nearest", "bicubic"} <= methods
     for r in rows:
         assert r["status"] == "ok", r["status"]
-        for column in bench.FINITE_COLUMNS:
+        for column in measure.FINITE_COLUMNS:
             assert math.isfinite(float(r[column])), (r["method"], column, r[column])
         assert r["variant"] and r["mitsuba"] and int(r["cpu_count"]) >= 1
         assert r["peak_memory_source"] in ("vmhwm", "tracemalloc")
@@ -56,14 +57,14 @@ def test_quick_fraction_writes_csv_plots_and_table(quick_fraction):
     md = (out / "fraction.md").read_text()
     assert md.startswith("Command: `python -m mitsuba_mrt bench fraction")
     assert "Mitsuba 3.9" in md and "| mrt-paper |" in md and "Relative time" in md
-    assert result["seconds"] < 60
+    assert result.seconds < 60
 
 
 def test_quick_tradeoff_reports_converged_and_equal_time(tmp_path):
-    result = bench.run_experiment("tradeoff", tmp_path, quick=True, progress=False,
-                                  methods="mrt-paper,nearest", res=24,
-                                  scenes_dir=SCENES)["tradeoff"]
-    rows = result["rows"]
+    result = run_experiment("tradeoff", tmp_path, quick=True, progress=False,
+                            methods="mrt-paper,nearest", res=24,
+                            scenes_dir=SCENES)["tradeoff"]
+    rows = result.rows
     path_rows = [r for r in rows if r["integrator"] == "path"]
     matte_rows = [r for r in rows if r["integrator"] == "matte"]
     assert path_rows and matte_rows
@@ -78,35 +79,37 @@ def test_quick_tradeoff_reports_converged_and_equal_time(tmp_path):
 
 
 def test_method_names_follow_modes_at_run_time(monkeypatch):
-    assert bench.resolve_methods()[0] == "full"
-    assert bench.method_name("paper") == "mrt-paper" and bench.method_name("nearest") == "nearest"
+    assert experiments.resolve_methods()[0] == "full"
+    assert experiments.method_name("paper") == "mrt-paper"
+    assert experiments.method_name("nearest") == "nearest"
     with monkeypatch.context() as patch:
         patch.setitem(MODES, "bench_test_mode", paper_reconstruct)
-        assert "mrt-bench_test_mode" in bench.resolve_methods()
-        assert bench.resolve_methods("bench_test_mode,bicubic") == [
+        assert "mrt-bench_test_mode" in experiments.resolve_methods()
+        assert experiments.resolve_methods("bench_test_mode,bicubic") == [
             "full", "mrt-bench_test_mode", "bicubic"]
-    assert "mrt-bench_test_mode" not in bench.resolve_methods()
-    with pytest.raises(bench.MRTError, match="unknown method 'nope'"):
-        bench.resolve_methods("mrt-paper,nope")
+    assert "mrt-bench_test_mode" not in experiments.resolve_methods()
+    with pytest.raises(MRTError, match="unknown method 'nope'"):
+        experiments.resolve_methods("mrt-paper,nope")
 
 
 def test_every_experiment_has_the_report_sweep():
-    fraction = bench.build_experiment("fraction")
+    fraction = experiments.build_experiment("fraction")
     assert [s.params["sample_fraction"] for s in fraction.points[0].settings] == pytest.approx(
         [0.025 * k for k in range(1, 11)])
-    filt = bench.build_experiment("filter").points[0].settings
+    filt = experiments.build_experiment("filter").points[0].settings
     assert len(filt) == 20 and {s.params["filter_sigma"] for s in filt} == {1, 2, 4, 8}
-    assert [p.defines["res"] for p in bench.build_experiment("pixels").points] == list(
+    assert [p.defines["res"] for p in experiments.build_experiment("pixels").points] == list(
         range(200, 1201, 100))
-    assert [p.scene for p in bench.build_experiment("objects").points][-1] == "paper_objects_10.xml"
-    assert len(bench.build_experiment("lights").points) == 10
-    trade = bench.build_experiment("tradeoff")
+    objects = experiments.build_experiment("objects").points
+    assert [p.scene for p in objects][-1] == "paper_objects_10.xml"
+    assert len(experiments.build_experiment("lights").points) == 10
+    trade = experiments.build_experiment("tradeoff")
     assert trade.points[0].defines == {"res": 400, "integrator": "path", "spp": 64,
                                        "jitter": "true"}
-    for name in bench.EXPERIMENTS:
-        for point in bench.build_experiment(name).points:
+    for name in experiments.EXPERIMENTS:
+        for point in experiments.build_experiment(name).points:
             assert (SCENES / point.scene).is_file()
-    assert bench.build_experiment("objects", res=50).points[0].defines["res"] == 50
+    assert experiments.build_experiment("objects", res=50).points[0].defines["res"] == 50
 
 
 def test_plots_run_headless_on_synthetic_rows(tmp_path):
@@ -121,25 +124,26 @@ def test_plots_run_headless_on_synthetic_rows(tmp_path):
                          "error": str(scale * x), "error_converged": "nan",
                          "relative_time": str(1 + scale), "total_s": "0.1", "spp": "1",
                          "sample_fraction": str(x), "setting": f"f={x}"})
-    exp = bench.build_experiment("fraction", quick=True)
-    bench.plot_sweep(rows, tmp_path / "a.png", exp)
-    bench.plot_tradeoff(rows, tmp_path / "b.png", bench.build_experiment("tradeoff", quick=True))
+    exp = experiments.build_experiment("fraction", quick=True)
+    report.plot_sweep(rows, tmp_path / "a.png", exp)
+    report.plot_tradeoff(rows, tmp_path / "b.png",
+                         experiments.build_experiment("tradeoff", quick=True))
     image = np.full((8, 8, 3), 0.5)
-    bench.plot_triptych(tmp_path / "c.png", image, image * 0.9, "mrt-paper")
+    report.plot_triptych(tmp_path / "c.png", image, image * 0.9, "mrt-paper")
     for name in ("a.png", "b.png", "c.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
     assert matplotlib.get_backend() == backend  # no global backend switch
-    assert "| mrt-paper |" in bench.markdown_tables(rows, exp)
+    assert "| mrt-paper |" in report.markdown_tables(rows, exp)
 
 
 def test_memory_meter_reports_a_peak():
     import numpy as np
 
-    meter = bench.MemoryMeter()
+    meter = measure.MemoryMeter()
     with meter.measure() as mem:
         block = np.ones(4_000_000)  # 32 MB
         block[::1000] = 2.0
-    assert mem["peak_mb"] > 0 and mem["delta_mb"] >= 20
+    assert mem.peak_mb > 0 and mem.delta_mb >= 20
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -175,12 +179,64 @@ def test_a_broken_mode_is_reported_not_fatal(tmp_path, monkeypatch):
 
     monkeypatch.setitem(MODES, "bench_nan", nan_mode)
     monkeypatch.setitem(MODES, "bench_raise", raising_mode)
-    result = bench.run_experiment("objects", tmp_path, quick=True, progress=False, res=24,
-                                  methods="bench_nan,bench_raise,nearest",
-                                  scenes_dir=SCENES)["objects"]
-    rows = result["rows"]
+    result = run_experiment("objects", tmp_path, quick=True, progress=False, res=24,
+                            methods="bench_nan,bench_raise,nearest",
+                            scenes_dir=SCENES)["objects"]
+    rows = result.rows
     status = {r["method"]: r["status"] for r in rows}
     assert status["full"] == status["nearest"] == "ok"
     assert status["mrt-bench_nan"] == "failed: 1 pixels of the image are NaN or Inf"
     assert status["mrt-bench_raise"] == "failed: RuntimeError: boom"
     assert "Failed runs" in (tmp_path / "objects.md").read_text()
+
+
+def test_gallery_lists_every_scene_of_the_folder():
+    on_disk = {p.stem for p in (SCENES / "gallery").glob("*.xml")}
+    assert set(experiments.GALLERY_SCENES) == on_disk
+    gallery = experiments.build_experiment("gallery")
+    assert [p.defines for p in gallery.points][0] == {"res": 128, "spp": 64}
+    assert experiments.build_experiment("gallery", quick=True).points[0].defines["res"] == 32
+
+
+def test_quick_gallery_has_every_method_and_reuses_the_converged_reference(tmp_path,
+                                                                           monkeypatch):
+    scenes = ("spot_textures", "two_sensors")
+    monkeypatch.setattr(experiments, "GALLERY_SCENES", scenes)
+    argv = ["bench", "gallery", "--quick", "--res", "24", "-o", str(tmp_path),
+            "--scenes", str(SCENES), "--no-progress"]
+    assert main(argv) == 0
+    rows = report.read_csv(tmp_path / "gallery.csv")
+    assert tuple(rows[0]) == report.CSV_COLUMNS and "min_value" in rows[0]
+    for scene in scenes:
+        mine = [r for r in rows if r["scene"] == f"gallery/{scene}.xml"]
+        assert {r["method"] for r in mine} == {"full", "full-equal-time",
+                                               *experiments.GALLERY_METHODS}
+        assert {r["matched_method"] for r in mine if r["method"] == "full-equal-time"} == set(
+            experiments.GALLERY_METHODS)
+        for r in mine:
+            assert r["status"] == "ok", (scene, r["method"], r["status"])
+            assert r["stochastic"] == "true" and int(r["converged_spp"]) == 64
+            assert int(r["width"]) == int(r["height"]) == 24
+            for column in ("relative_time", "error_converged", "psnr_converged_db", "min_value"):
+                assert math.isfinite(float(r[column])), (scene, r["method"], column)
+        full = next(r for r in mine if r["method"] == "full")
+        assert float(full["relative_time"]) == 1.0 and float(full["min_value"]) >= 0
+        assert (tmp_path / f"gallery_{scene}.png").read_bytes()[:4] == b"\x89PNG"
+        assert (tmp_path / "cache" / f"{scene}_24_64.npy").is_file()
+    assert not (tmp_path / "gallery.png").exists()
+    md = (tmp_path / "gallery.md").read_text()
+    assert md.startswith("Command: `python -m mitsuba_mrt bench gallery --quick")
+    assert "| spot_textures | mrt-auto |" in md and "Pixels below 0 where" in md
+
+    cached = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "cache").iterdir()}
+    assert sorted(cached) == [f"{scene}_24_64.npy" for scene in scenes]
+
+    def render_again(self):
+        raise AssertionError("the converged reference was rendered again")
+
+    monkeypatch.setattr(measure.PointRunner, "_render_converged", render_again)
+    assert main(argv + ["--methods", "bicubic"]) == 0
+    rerun = report.read_csv(tmp_path / "gallery.csv")
+    assert {r["method"] for r in rerun} == {"full", "bicubic", "full-equal-time"}
+    assert all(math.isfinite(float(r["error_converged"])) for r in rerun)
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "cache").iterdir()} == cached

@@ -1,0 +1,531 @@
+"""Measuring one point of an experiment: every method, timed and metered, and its rows.
+
+For each point (a scene file with its ``<default>`` values and spp) the
+scene is loaded once, and :class:`PointRunner` then
+
+1. *warms up*: every method is called once (Dr.Jit compiles its kernels
+   then; that first-call time is the ``warmup_s`` column);
+2. runs *timed rounds*, ``repeats`` times the full render and every method
+   in turn, alternating, in this process; a point whose full render is fast
+   gets more rounds, until the full render's timed runs add up to
+   ``min_seconds`` (a median of three millisecond runs on a busy machine is
+   noise), at most :data:`MAX_REPEATS` rounds and
+   :data:`EXTRA_ROUNDS_SECONDS` of extra wall time (the ``repeats`` column
+   holds the rounds run);
+3. *detects a stochastic integrator* by rendering with a second seed; then
+   every row's ``error_converged`` is measured against a *converged
+   reference* (the mean of :data:`CONVERGED_FACTOR` full renders with other
+   seeds; kept in ``<cache>/<scene>_<res>_<spp>.npy`` when the experiment
+   caches it, ``spp`` being the reference's), and
+4. times the *full render at other spp* (1, 4, 16 ...), for the
+   ``full-equal-time`` row of every method: the full render at the spp whose
+   median time is closest to that method's;
+5. writes one :class:`MethodRow` per method and setting: the lower median of
+   its totals, with the stage times of that same run, and the errors and
+   lowest pixel value of its image.
+
+A method that raises, or returns NaN or Inf, gets a row whose ``status``
+says so; the sweep goes on.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+import tracemalloc
+from contextlib import contextmanager
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..app.imageio import atomic_path
+from .experiments import EQUAL_TIME, FULL, Experiment, Point, Setting, available_methods
+
+#: Timed seconds of the full render below which a point gets more rounds.
+MIN_TIMED_SECONDS = 1.0
+#: Most timed rounds of one point.
+MAX_REPEATS = 25
+#: Wall seconds after which a point gets no more extra rounds.
+EXTRA_ROUNDS_SECONDS = 10.0
+
+#: Converged reference of a stochastic point: the mean of this many full
+#: renders (other seeds), so it has this factor times the point's spp.
+CONVERGED_FACTOR = 16
+
+
+# --------------------------------------------------------------------------- memory
+
+def _proc_status_kb(field_name: str) -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith(field_name + ":"):
+                return int(line.split()[1])
+    raise OSError(f"no {field_name} in /proc/self/status")
+
+
+@dataclass
+class Memory:
+    """Peak memory of one call, and its rise over what was resident before, in MB."""
+
+    peak_mb: float = math.nan
+    delta_mb: float = math.nan
+
+
+class MemoryMeter:
+    """Peak memory of one call.
+
+    On Linux: the process's peak resident set (``VmHWM``), reset before the
+    call by writing 5 to ``/proc/self/clear_refs`` (source ``vmhwm``).
+    Elsewhere: the peak of Python's own allocations, numpy's included, from
+    :mod:`tracemalloc` (source ``tracemalloc``; Dr.Jit's memory is missed).
+    """
+
+    def __init__(self):
+        self.source = "tracemalloc"
+        try:
+            self._reset()
+            _proc_status_kb("VmHWM")
+            self.source = "vmhwm"
+        except (OSError, ValueError):
+            pass
+
+    @staticmethod
+    def _reset():
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+
+    @contextmanager
+    def measure(self):
+        """Yield a :class:`Memory` that is filled in when the block ends."""
+        out = Memory()
+        if self.source == "vmhwm":
+            self._reset()
+            base = _proc_status_kb("VmRSS")
+            yield out
+            peak = _proc_status_kb("VmHWM")
+            out.peak_mb, out.delta_mb = peak / 1024.0, max(peak - base, 0) / 1024.0
+        else:
+            started = not tracemalloc.is_tracing()
+            if started:
+                tracemalloc.start()
+            tracemalloc.reset_peak()
+            base = tracemalloc.get_traced_memory()[0]
+            try:
+                yield out
+                peak = tracemalloc.get_traced_memory()[1]
+            finally:
+                if started:
+                    tracemalloc.stop()
+            out.peak_mb, out.delta_mb = peak / 2**20, max(peak - base, 0) / 2**20
+
+
+# --------------------------------------------------------------------------- runs
+
+@dataclass
+class Stages:
+    """Seconds of one call by stage; a full render is all ``trace``."""
+
+    trace: float
+    edges: float
+    interpolate: float
+    total: float
+
+
+@dataclass
+class Run:
+    """One timed call of a method."""
+
+    stages: Stages
+    memory: Memory
+
+    @property
+    def total(self) -> float:
+        return self.stages.total
+
+
+@dataclass
+class Runs:
+    """Every timed run of one method at one setting, and what the last one made."""
+
+    runs: list = field(default_factory=list)
+    warmup: float = math.nan
+    image: np.ndarray | None = None
+    traced: int = 0
+    spp: int = 0
+    mode_used: str = ""
+
+    def add(self, image: np.ndarray, run: Run) -> None:
+        self.runs.append(run)
+        self.image = image
+
+    @property
+    def totals(self) -> list:
+        return [r.total for r in self.runs]
+
+    def median(self) -> Run:
+        """The run of the lower median total."""
+        order = np.argsort(self.totals, kind="stable")
+        return self.runs[int(order[(len(order) - 1) // 2])]
+
+
+# --------------------------------------------------------------------------- rows
+
+@dataclass
+class MethodRow:
+    """One row of a bench CSV: one method at one setting of one point.
+
+    The fields, in order, are the CSV's columns; a number not measured is NaN.
+    ``min_value`` is the lowest value of any channel of the image (below 0:
+    negative radiance, which a full render does not make).
+    """
+
+    experiment: str = ""
+    scene: str = ""
+    group: str = ""
+    method: str = ""
+    mode: str = ""
+    setting: str = ""
+    x_name: str = ""
+    x: float = math.nan
+    sample_fraction: float = math.nan
+    filter_sigma: float = math.nan
+    filter_cutoff: float = math.nan
+    integrator: str = ""
+    spp: int = 0
+    defines: str = ""
+    width: int = 0
+    height: int = 0
+    traced_pixels: int = 0
+    repeats: int = 0
+    trace_s: float = math.nan
+    edges_s: float = math.nan
+    interpolate_s: float = math.nan
+    total_s: float = math.nan
+    total_min_s: float = math.nan
+    total_max_s: float = math.nan
+    warmup_s: float = math.nan
+    reference_s: float = math.nan
+    relative_time: float = math.nan
+    error: float = math.nan
+    psnr_db: float = math.nan
+    stochastic: bool = False
+    converged_spp: int | str = ""
+    error_converged: float = math.nan
+    psnr_converged_db: float = math.nan
+    min_value: float = math.nan
+    matched_method: str = ""
+    peak_memory_mb: float = math.nan
+    memory_delta_mb: float = math.nan
+    peak_memory_source: str = ""
+    status: str = "ok"
+    variant: str = ""
+    mitsuba: str = ""
+    drjit: str = ""
+    cpu_count: int = 0
+    cpu_model: str = ""
+    machine: str = ""
+    platform: str = ""
+    python: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def shown_error(self) -> float:
+        """The error a plot shows: against the converged reference when there is one."""
+        return self.error_converged if math.isfinite(self.error_converged) else self.error
+
+
+#: Columns that hold a finite number in every row whose status is ``ok``.
+FINITE_COLUMNS = ("width", "height", "traced_pixels", "trace_s", "edges_s", "interpolate_s",
+                  "total_s", "warmup_s", "reference_s", "relative_time", "error",
+                  "peak_memory_mb")
+
+
+@dataclass
+class PointImages:
+    """The images of one setting at a point, for a picture.
+
+    ``reference`` is the converged reference when the point is stochastic
+    (``converged``), else the full render; ``methods`` maps a method name to
+    its image, and ``modes_used`` to the mode that ran (what ``auto`` chose).
+    """
+
+    reference: np.ndarray
+    converged: bool
+    methods: dict
+    modes_used: dict
+
+
+# --------------------------------------------------------------------------- the runner
+
+def _no_tick():
+    """The progress bar counts the requested rounds only."""
+
+
+def _failure(exc: BaseException) -> str:
+    """The status of a run that raised: one line."""
+    if isinstance(exc, KeyboardInterrupt):
+        raise exc
+    message = str(exc).strip().splitlines()
+    return f"failed: {type(exc).__name__}: {message[0] if message else ''}"
+
+
+def _paper_error(image, reference):
+    from ..recon.metrics import paper_error
+
+    return paper_error(image, reference)
+
+
+def _psnr(image, reference):
+    from ..recon.metrics import psnr
+
+    return psnr(image, reference)
+
+
+class PointRunner:
+    """Measures every method of one point; :meth:`run` returns its rows and images.
+
+    A runner measures one point once: it keeps what it measured, step by
+    step, on itself.
+    """
+
+    def __init__(self, experiment: Experiment, point: Point, methods: list, repeats: int,
+                 scenes_dir: Path, meter: MemoryMeter, env: dict, tick,
+                 min_seconds: float = MIN_TIMED_SECONDS, cache_dir: Path | None = None):
+        self.exp, self.point, self.methods = experiment, point, methods
+        self.repeats, self.scenes_dir, self.meter, self.env = repeats, scenes_dir, meter, env
+        self.tick = tick
+        self.min_seconds = min_seconds  # timed seconds of the full render to reach
+        self.cache_dir = cache_dir  # converged references kept here (None: not kept)
+        self.modes = available_methods()
+        self.mrt_methods = [m for m in methods if m != FULL]
+
+    def run(self, keep_images_for: int | None) -> tuple[list, PointImages | None]:
+        """Measure the point; keep the images of setting ``keep_images_for`` (None: none)."""
+        self._load()
+        self._warm_up()
+        rounds = self._timed_rounds()
+        stochastic = self._is_stochastic()
+        self.converged = self._converged_reference() if stochastic else None
+        candidates = self._full_at_other_spp() if stochastic else {self.point.spp: self.full}
+        self.tick()
+        rows = self._rows(rounds, stochastic, candidates)
+        for (s, m), status in self.failed.items():
+            print(f"warning: {m} at {self.point.scene} {self.point.settings[s].label}: {status}",
+                  file=sys.stderr)
+        return rows, self._images(keep_images_for)
+
+    # one call, timed and metered
+    def _full(self, spp, seed=0) -> tuple[np.ndarray, Run]:
+        from ..renderer.api import render_reference
+
+        with self.meter.measure() as mem:
+            image, seconds = render_reference(self.scene, spp=spp, seed=seed)
+        return image, Run(Stages(seconds, 0.0, 0.0, seconds), mem)
+
+    def _mrt(self, mode, setting: Setting):
+        from ..renderer.api import render
+
+        with self.meter.measure() as mem:
+            result = render(self.scene, spp=self.point.spp, seed=0, mode=mode, **setting.params)
+        t = result.timings
+        return result, Run(Stages(t.trace, t.edges, t.interpolate, t.total), mem)
+
+    # the steps of run()
+    def _load(self) -> None:
+        from ..renderer.scene import load_scene
+
+        point = self.point
+        self.scene = load_scene(self.scenes_dir / point.scene, **point.defines)
+        self.width, self.height = (int(v) for v in self.scene.sensors()[0].film().crop_size())
+        self.full = Runs()
+        self.runs = {(s, m): Runs() for s in range(len(point.settings)) for m in self.mrt_methods}
+        self.failed = {}
+        self.converged = None
+
+    def _warm_up(self) -> None:
+        """The first call of everything (Dr.Jit compiles here): the ``warmup_s`` column."""
+        self.full.warmup = self._full(self.point.spp)[1].total
+        self.tick()
+        for (s, m), r in self.runs.items():
+            try:
+                result, _ = self._mrt(self.modes[m], self.point.settings[s])
+                r.warmup = result.timings.total
+            except Exception as exc:  # noqa: BLE001 - a broken mode must not end the sweep
+                self.failed[(s, m)] = _failure(exc)
+            self.tick()
+
+    def _timed_rounds(self) -> int:
+        """Alternating rounds: the full render, then every method at every setting.
+
+        Runs of milliseconds get more rounds, until the full render has
+        ``min_seconds`` (at most MAX_REPEATS rounds or EXTRA_ROUNDS_SECONDS of
+        wall time), since a median of 3 is noise at that scale. Returns the
+        number of rounds.
+        """
+        point, full = self.point, self.full
+        rounds, begin = 0, time.perf_counter()
+        while rounds < self.repeats or (
+                sum(full.totals) < self.min_seconds and rounds < MAX_REPEATS
+                and time.perf_counter() - begin < EXTRA_ROUNDS_SECONDS):
+            tick = self.tick if rounds < self.repeats else _no_tick
+            rounds += 1
+            full.add(*self._full(point.spp))
+            tick()
+            for (s, m), r in self.runs.items():
+                if (s, m) not in self.failed:
+                    self._time_method(s, m, r)
+                tick()
+        full.traced, full.spp = self.width * self.height, point.spp
+        return rounds
+
+    def _time_method(self, s: int, m: str, r: Runs) -> None:
+        try:
+            result, run = self._mrt(self.modes[m], self.point.settings[s])
+        except Exception as exc:  # noqa: BLE001 - a broken mode must not end the sweep
+            self.failed[(s, m)] = _failure(exc)
+            return
+        r.add(result.image, run)
+        r.traced, r.spp = int(result.traced_mask.sum()), int(result.spp)
+        r.mode_used = result.mode_used
+
+    def _is_stochastic(self) -> bool:
+        """Whether a second seed renders a different image."""
+        second, _ = self._full(self.point.spp, seed=1)
+        return not np.allclose(second, self.full.image, rtol=0.0, atol=1e-6)
+
+    def _converged_reference(self) -> np.ndarray:
+        """The converged reference: from the cache when it holds one of this size."""
+        path = self._cache_path()
+        if path is not None and path.is_file():
+            try:
+                image = np.load(path)
+            except (OSError, ValueError):
+                image = None
+            if (image is not None and image.shape == (self.height, self.width, 3)
+                    and np.isfinite(image).all()):
+                return image
+        image = self._render_converged()
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path) as tmp, open(tmp, "wb") as f:
+                np.save(f, image)
+        return image
+
+    def _cache_path(self) -> Path | None:
+        if self.cache_dir is None:
+            return None
+        point = self.point
+        res = point.defines.get("res", self.width)
+        return (Path(self.cache_dir)
+                / f"{Path(point.scene).stem}_{res}_{CONVERGED_FACTOR * point.spp}.npy")
+
+    def _render_converged(self) -> np.ndarray:
+        """The mean of CONVERGED_FACTOR full renders with other seeds."""
+        return np.mean([self._full(self.point.spp, seed=1000 + k)[0]
+                        for k in range(CONVERGED_FACTOR)], axis=0)
+
+    def _full_at_other_spp(self) -> dict:
+        """Timed full renders at spp = 1, 4, 16 ... -> :class:`Runs`, the point's own included.
+
+        Squares, what the stratified sampler takes: every one below the
+        point's spp, then up until one is as slow as the slowest method (at
+        most CONVERGED_FACTOR times the point's spp).
+        """
+        point = self.point
+        candidates = {point.spp: self.full}
+        slowest = max((r.median().total for r in self.runs.values() if r.runs), default=0.0)
+        spp = 1
+        while spp <= CONVERGED_FACTOR * point.spp:
+            if spp not in candidates:
+                cand = Runs(spp=spp, traced=self.width * self.height)
+                cand.warmup = self._full(spp)[1].total
+                for _ in range(self.repeats):
+                    cand.add(*self._full(spp))
+                candidates[spp] = cand
+            if spp >= point.spp and candidates[spp].median().total >= slowest:
+                break
+            spp *= 4
+        return candidates
+
+    def _rows(self, rounds: int, stochastic: bool, candidates: dict) -> list:
+        """Rows: the full render (at every spp tried, if asked), then every method,
+        each followed by the full render at equal time when the point is stochastic."""
+        point, exp = self.point, self.exp
+        base = MethodRow(experiment=exp.name, scene=point.scene, x_name=exp.x_name,
+                         integrator=point.integrator, defines=point.defines_text,
+                         width=self.width, height=self.height, repeats=rounds,
+                         reference_s=self.full.median().total, stochastic=stochastic,
+                         converged_spp=CONVERGED_FACTOR * point.spp if stochastic else "",
+                         peak_memory_source=self.meter.source, **self.env)
+        rows = []
+        first = point.settings[0]
+        full_setting = Setting(first.params if len(point.settings) == 1 else {},
+                               first.x if len(point.settings) == 1 else point.x,
+                               "full render", point.group)
+        rows.append(self._row(base, FULL, None, self.full, full_setting))
+        if stochastic and exp.full_spp_sweep:
+            for spp, cand in sorted(candidates.items()):
+                if spp != point.spp:
+                    rows.append(self._row(base, FULL, None, cand,
+                                          Setting({}, math.nan, f"spp={spp}", point.group)))
+        for (s, m), r in self.runs.items():
+            setting = point.settings[s]
+            if (s, m) in self.failed:
+                rows.append(self._row(base, m, self.modes[m], r, setting,
+                                      status=self.failed[(s, m)]))
+                continue
+            rows.append(self._row(base, m, self.modes[m], r, setting))
+            if stochastic and rows[-1].ok:
+                t = rows[-1].total_s
+                spp = min(candidates, key=lambda c: abs(math.log(
+                    candidates[c].median().total / t)))
+                rows.append(self._row(base, EQUAL_TIME, None, candidates[spp], setting,
+                                      matched_method=m))
+        return rows
+
+    def _row(self, base: MethodRow, method: str, mode, runs: Runs, setting: Setting,
+             **extra) -> MethodRow:
+        """The row of ``runs``: the median run's times, the last image's errors."""
+        point = self.point
+        out = replace(base, method=method, mode=mode or "", group=setting.group or point.group,
+                      setting=setting.label, x=setting.x, spp=runs.spp or point.spp,
+                      sample_fraction=setting.params.get("sample_fraction", math.nan),
+                      filter_sigma=setting.params.get("filter_sigma", math.nan),
+                      filter_cutoff=setting.params.get("filter_cutoff", math.nan),
+                      traced_pixels=runs.traced, warmup_s=runs.warmup, status="ok",
+                      matched_method="")
+        if runs.runs:
+            median = runs.median()
+            out = replace(out, trace_s=median.stages.trace, edges_s=median.stages.edges,
+                          interpolate_s=median.stages.interpolate, total_s=median.total,
+                          total_min_s=min(runs.totals), total_max_s=max(runs.totals),
+                          relative_time=median.total / base.reference_s,
+                          peak_memory_mb=max(r.memory.peak_mb for r in runs.runs),
+                          memory_delta_mb=max(r.memory.delta_mb for r in runs.runs))
+            bad = int((~np.isfinite(runs.image)).any(axis=-1).sum())
+            if bad:  # timed, but no error: say so in the status
+                return replace(out, status=f"failed: {bad} pixels of the image are NaN or Inf",
+                               **extra)
+            reference = self.full.image
+            out = replace(out, error=_paper_error(runs.image, reference),
+                          psnr_db=_psnr(runs.image, reference),
+                          min_value=float(runs.image.min()))
+            if self.converged is not None:
+                out = replace(out, error_converged=_paper_error(runs.image, self.converged),
+                              psnr_converged_db=_psnr(runs.image, self.converged))
+        return replace(out, **extra)
+
+    def _images(self, setting: int | None) -> PointImages | None:
+        if setting is None:
+            return None
+        kept = {m: self.runs[(setting, m)] for m in self.mrt_methods
+                if (setting, m) not in self.failed and self.runs[(setting, m)].image is not None}
+        return PointImages(self.converged if self.converged is not None else self.full.image,
+                           self.converged is not None,
+                           {m: r.image for m, r in kept.items()},
+                           {m: r.mode_used for m, r in kept.items()})

@@ -1,0 +1,236 @@
+"""Running a bench experiment end to end: measure every point, then write the report.
+
+:func:`run_experiment` builds the experiment (:mod:`.experiments`),
+measures its points one after the other (:mod:`.measure`), rewriting the
+CSV after every point so that a crash keeps what was measured, and then
+writes the plot, the triptych (or, for ``gallery``, a picture per scene)
+and the markdown tables (:mod:`.report`) into the output folder, each file
+atomically.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..app.imageio import atomic_path
+from ..errors import MRTError
+from .experiments import EXPERIMENTS, build_experiment, resolve_methods
+from .measure import CONVERGED_FACTOR, MIN_TIMED_SECONDS, MemoryMeter, PointRunner
+from .report import (environment_line, markdown_tables, plot_sweep, plot_tradeoff,
+                     plot_triptych, read_csv, write_csv)
+
+#: The subfolder of the output folder that keeps converged references.
+CACHE_DIR = "cache"
+
+
+@dataclass
+class ExperimentResult:
+    """What one experiment wrote: its rows (as the CSV holds them) and files.
+
+    ``png`` is the plot (None for ``gallery``), ``triptych`` the picture of
+    the representative setting, ``pictures`` those of every point.
+    """
+
+    rows: list
+    csv: Path
+    png: Path | None
+    triptych: Path | None
+    md: Path
+    seconds: float
+    pictures: list = field(default_factory=list)
+
+    @property
+    def files(self) -> list:
+        return [f for f in (self.csv, self.png, self.md, self.triptych) if f] + self.pictures
+
+
+def _scenes_dir(scenes_dir=None) -> Path:
+    if scenes_dir is not None:
+        path = Path(scenes_dir)
+    else:
+        path = Path(__file__).resolve().parents[2] / "scenes_xml"
+    if not (path / "paper_fig1.xml").is_file():
+        raise MRTError(f"the report's scenes are not in {path}: pass --scenes DIR "
+                       "(the repository's scenes_xml folder)")
+    return path
+
+
+def _progress(total: int, desc: str, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="run", file=sys.stderr, disable=not enabled,
+                dynamic_ncols=True, leave=True)
+
+
+def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
+                   repeats: int | None = None, variant: str = "auto", methods=None,
+                   res: int | None = None, scenes_dir=None, progress: bool = True,
+                   command: str | None = None) -> dict:
+    """Run experiment ``name`` (or ``all``) and write its outputs into ``out_dir``.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`EXPERIMENTS`, or ``all``.
+    out_dir : path
+    quick : bool
+        A reduced sweep at low resolution (repeats 1 unless given).
+    repeats : int, optional
+        Timed runs of every method at every point (default 3, quick 1).
+    variant : str
+        Mitsuba variant (``auto``: LLVM when usable).
+    methods : list or comma-separated str, optional
+        Method names (``mrt-paper``, ``nearest``...); default the experiment's
+        (every mode but ``auto``; for ``gallery`` every mode and ``bicubic``);
+        ``full`` always.
+    res : int, optional
+        Image side for every experiment but ``pixels``.
+    scenes_dir : path, optional
+        Folder of the report's scenes (default: the repository's ``scenes_xml``).
+    progress : bool
+        Show a progress bar on stderr.
+    command : str, optional
+        The command line written at the top of the markdown table.
+
+    Returns
+    -------
+    dict
+        ``experiment -> ExperimentResult`` (for ``all``: one entry per experiment).
+    """
+    if name == "all":
+        out = {}
+        for exp in EXPERIMENTS:
+            out.update(run_experiment(exp, out_dir, quick=quick, repeats=repeats,
+                                      variant=variant, methods=methods,
+                                      res=None if exp == "pixels" else res,
+                                      scenes_dir=scenes_dir, progress=progress,
+                                      command=command))
+        return out
+    if repeats is None:
+        repeats = 1 if quick else 3
+    if int(repeats) != repeats or repeats < 1:
+        raise MRTError(f"--repeats must be an integer >= 1, got {repeats}")
+    experiment = build_experiment(name, quick=quick, res=res)
+    from ..renderer.variants import activate, environment
+
+    variant = activate(variant)
+    method_list = resolve_methods(methods if methods is not None else experiment.methods)
+    scenes = _scenes_dir(scenes_dir)
+    for point in experiment.points:
+        if not (scenes / point.scene).is_file():
+            raise MRTError(f"scene file not found: {scenes / point.scene}")
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise MRTError(f"cannot create output folder {out}: {exc.strerror}") from None
+    if command is None:
+        command = "python -m mitsuba_mrt bench " + shlex.join(
+            [name, "-o", os.fspath(out_dir)] + (["--quick"] if quick else [])
+            + ["--repeats", str(repeats), "--variant", variant]
+            + (["--res", str(res)] if res is not None else [])
+            + (["--methods", ",".join(method_list[1:])] if methods is not None else []))
+
+    env = environment(variant)
+    meter = MemoryMeter()
+    started = time.perf_counter()
+    per_point = [(1 + len(p.settings) * (len(method_list) - 1)) * (repeats + 1) + 1
+                 for p in experiment.points]
+    rows, images, pictures = [], None, []
+    csv_path = out / f"{name}.csv"
+    rep_point, rep_setting = experiment.representative
+    cache = out / CACHE_DIR if experiment.cache_converged else None
+    with _progress(sum(per_point), name, progress) as bar:
+        for k, point in enumerate(experiment.points):
+            bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px", refresh=False)
+            runner = PointRunner(experiment, point, method_list, repeats, scenes, meter, env,
+                                 lambda: bar.update(1), 0.0 if quick else MIN_TIMED_SECONDS,
+                                 cache_dir=cache)
+            keep = 0 if experiment.pictures else (rep_setting if k == rep_point else None)
+            point_rows, point_images = runner.run(keep)
+            rows += point_rows
+            write_csv(csv_path, rows)  # after every point: a crash keeps what was measured
+            if experiment.pictures:
+                picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
+                                   point_images, point, experiment.pictures)
+                pictures += [picture] if picture else []
+            elif point_images is not None:
+                images = (point_images, point, point.settings[rep_setting])
+    seconds = time.perf_counter() - started
+
+    text_rows = read_csv(csv_path)
+    png = None
+    if experiment.kind != "gallery":
+        png = out / f"{name}.png"
+        (plot_tradeoff if experiment.kind == "tradeoff" else plot_sweep)(text_rows, png,
+                                                                         experiment)
+    triptych = None
+    if images is not None:
+        triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
+
+    md = out / f"{name}.md"
+    text = (f"Command: `{command}`\n\n"
+            f"Environment: {environment_line(env)}; repeats {repeats}, more where the full "
+            f"render is fast (lower median); "
+            f"wall time of the whole experiment {seconds:.0f} s.\n\n"
+            + markdown_tables(text_rows, experiment))
+    with atomic_path(md) as tmp:
+        Path(tmp).write_text(text)
+    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
+
+
+def _triptych(path, rows, images, point, setting):
+    """Reference | the MRT mode of lowest error at ``setting`` | its error map; None if
+    no method has an image there."""
+    if not images.methods:
+        return None
+    candidates = [r for r in rows if r.ok and r.scene == point.scene
+                  and r.setting == setting.label and r.method in images.methods
+                  and r.defines == point.defines_text]
+    mrt = [r for r in candidates if r.method.startswith("mrt-")] or candidates
+    if not mrt:
+        return None
+    best = min(mrt, key=lambda r: r.shown_error)
+    plot_triptych(path, images.reference, images.methods[best.method],
+                  f"{best.method}, {setting.label}: error {best.shown_error:.4f}, "
+                  f"time x{best.relative_time:.2f}", _reference_title(images, point))
+    return path
+
+
+def _reference_title(images, point) -> str:
+    return (f"converged reference ({CONVERGED_FACTOR * point.spp} spp)"
+            if images.converged else f"full render ({point.spp} spp)")
+
+
+def _picture(path, rows, images, point, methods):
+    """Reference | each of ``methods`` that has an image | error map of the first of them;
+    None if none has."""
+    shown = [m for m in methods if m in images.methods]
+    if not shown:
+        return None
+    by_method = {r.method: r for r in rows if r.ok and r.setting == point.settings[0].label}
+    panels = []
+    for m in shown:
+        title = m
+        mode, used = m.removeprefix("mrt-"), images.modes_used.get(m, "")
+        if used and used != mode:
+            title += f" (ran {used})"
+        r = by_method.get(m)
+        if r is not None:
+            title += f"\nerror {r.shown_error:.4f}, time x{r.relative_time:.2f}"
+        panels.append((title, images.methods[m]))
+    (title, image), others = panels[0], panels[1:]
+    plot_triptych(path, images.reference, image, title, _reference_title(images, point),
+                  others=others, error_title=f"error of {shown[0]}, log10")
+    return path
+
+
+def summary_line(name: str, result: ExperimentResult) -> str:
+    """One terminal line per experiment."""
+    return (f"{name}: {len(result.rows)} rows in {result.seconds:.1f} s -> "
+            + ", ".join(os.fspath(f) for f in result.files))
