@@ -19,6 +19,10 @@ from .recon.ids import ID_RULES, encode_ids
 from .recon.sampling import check_fraction
 
 
+#: Denoisers the traced grid can go through before the reconstruction.
+DENOISERS = ("none", "oidn")
+
+
 @dataclass(frozen=True)
 class MRTParams:
     """Parameters of the reconstruction, named as in the report.
@@ -40,6 +44,9 @@ class MRTParams:
         ``auto``: the report's rule in mode ``paper``, ``exact`` elsewhere.
     rbf_degree : {-1, 0, 1}
         Polynomial degree added to the linear RBF (-1: the report's).
+    denoise : {'none', 'oidn'}
+        Denoise the traced grid before reconstructing it (``oidn``: Intel
+        Open Image Denoise, with the trace's albedo and normals).
     """
 
     sample_fraction: float = 0.1
@@ -49,6 +56,7 @@ class MRTParams:
     num_cappoints: int = 10
     id_rule: str = "auto"
     rbf_degree: int = -1
+    denoise: str = "none"
 
     def __post_init__(self):
         check_fraction("sample_fraction", self.sample_fraction)
@@ -65,6 +73,8 @@ class MRTParams:
                            f"got {self.id_rule!r}")
         if self.rbf_degree not in (-1, 0, 1):
             raise MRTError(f"rbf_degree must be -1, 0 or 1, got {self.rbf_degree}")
+        if self.denoise not in DENOISERS:
+            raise MRTError(f"denoise must be one of {', '.join(DENOISERS)}, got {self.denoise!r}")
 
     def rule_for(self, mode: str) -> str:
         """The id rule in force for ``mode`` (``auto`` resolved)."""
@@ -111,6 +121,9 @@ class SparseTrace:
     alpha : ndarray, shape (n,), optional
         Alpha as ``mi.render`` develops it: the share of the pixel's samples
         whose camera ray hit something (None where radiance was not traced).
+    normal : ndarray, shape (n, 3), optional
+        World-space shading normal at the pixel-centre hit (0 on a miss);
+        None where the AOVs were not traced.
     variance : ndarray, shape (n, 3), optional
         Variance of one sample's RGB about the pixel's mean: the pixel's
         noise is about ``sqrt(variance / spp)``.
@@ -132,6 +145,7 @@ class SparseTrace:
     curved_mirror: np.ndarray | None = None
     alpha: np.ndarray | None = None
     variance: np.ndarray | None = None
+    normal: np.ndarray | None = None
 
     def ids(self, rule: str) -> np.ndarray:
         """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).
@@ -156,6 +170,7 @@ class Timings:
 
     trace: float = 0.0
     trace_more: float = 0.0
+    denoise: float = 0.0
     edges: float = 0.0
     interpolate: float = 0.0
     full_render: float = 0.0
@@ -165,7 +180,7 @@ class Timings:
     def close(self, total: float) -> "Timings":
         """Set ``total`` and put what the stages do not account for into ``other``."""
         self.total = total
-        self.other = max(0.0, total - (self.trace + self.trace_more + self.edges
+        self.other = max(0.0, total - (self.trace + self.trace_more + self.denoise + self.edges
                                        + self.interpolate + self.full_render))
         return self
 

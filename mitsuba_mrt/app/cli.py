@@ -12,6 +12,7 @@ import sys
 
 from ..errors import MRTError
 from ..renderer.variants import VARIANT_CHOICES
+from ..types import DENOISERS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,6 +54,9 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
                         "auto: paper in mode paper, exact elsewhere (auto)")
     g.add_argument("--rbf-degree", type=int, choices=(-1, 0, 1), default=None,
                    help="polynomial added to the linear RBF; -1 is the report's (-1)")
+    g.add_argument("--denoise", choices=DENOISERS, default=None,
+                   help="denoise the traced grid before reconstructing it; oidn: Intel Open "
+                        "Image Denoise (pip install mitsuba-mrt[denoise]) (none)")
 
 
 def _modes() -> list[str]:
@@ -116,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _param_overrides(args) -> dict:
     """The MRT parameters given on the command line (None: not given)."""
-    names = [name for name, _, _ in _PARAM_OPTIONS] + ["id_rule", "rbf_degree"]
+    names = [name for name, _, _ in _PARAM_OPTIONS] + ["id_rule", "rbf_degree", "denoise"]
     return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
 
 

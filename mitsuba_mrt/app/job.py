@@ -112,6 +112,7 @@ def run_render_job(job: RenderJob) -> RunSummary:
     reference = None
     if job.reference and not full:
         reference, seconds = render_reference(scene, spp=result.spp, seed=job.seed)
+        # (the reference's alpha is the film's; only RGB is compared and written)
     summary = RunSummary(
         scene=os.fspath(job.scene), variant=variant, width=width, height=height,
         spp=result.spp, mode=result.mode, mode_used=result.mode_used, why=_why(result),
@@ -131,6 +132,9 @@ def run_render_job(job: RenderJob) -> RunSummary:
         summary.psnr_db = psnr(result.image, reference)
 
     channels = {"R": result.image[..., 0], "G": result.image[..., 1], "B": result.image[..., 2]}
+    rgba = scene.sensors()[0].film().base_channels_count() == 4
+    if rgba and result.alpha is not None:
+        channels["A"] = result.alpha
     for name, image in aov_images(result).items():
         channels[name] = image.astype(np.uint32) if name != "id" else image
     with OutputSet(job.out_dir) as out:

@@ -12,7 +12,7 @@ Example::
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -23,6 +23,8 @@ from ..modes import check_mode, reconstruct
 from ..recon.sampling import SamplePattern, grid_pattern
 from ..types import (MRTParams, SeedStream, Skips, SparseTrace, Timings, TracedCounts,
                      check_radiance)
+from ..recon.compose import region_values
+from ..recon.denoise import denoise_grid
 from . import auto
 from .scene import resolve_sensor, unwrap
 from .trace import is_jit, trace_pixels
@@ -60,6 +62,9 @@ class MRTResult:
         What ``auto`` chose and why.
     traced : TracedCounts
         Pixels traced with the nested integrator, by why.
+    alpha : ndarray, shape (height, width), or None
+        Alpha as ``mi.render`` develops it: traced at traced pixels, the
+        mean of its region's samples elsewhere (the background's is 0).
     """
 
     image: np.ndarray
@@ -76,6 +81,7 @@ class MRTResult:
     stats: dict = field(default_factory=dict)
     auto: auto.AutoDecision | None = None
     traced: TracedCounts = field(default_factory=TracedCounts)
+    alpha: np.ndarray | None = None
 
 
 @dataclass
@@ -139,10 +145,9 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     if mode == "auto":
         decision = auto.decide_without_pilot(width, height, spp, is_jit())
         if decision is not None:  # decided before any grid work: a plain full render
-            image, seconds = render_reference(scene, wrapper.nested, sensor=sensor, spp=spp,
-                                              seed=seed)
-            return _full_result(image, None, None, _empty_trace(spp), params, spp, decision,
-                                Timings(full_render=seconds), start)
+            image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, spp, seed)
+            return _full_result(image, alpha, None, None, _empty_trace(spp), params, spp,
+                                decision, Timings(full_render=seconds), start)
     pattern = grid_pattern(width, height, params.sample_fraction)
     timings = Timings()
     decision = pilot = None
@@ -156,14 +161,21 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID)
     used = decision.mode_used if decision else mode
     timings.trace = trace.seconds
+    if params.denoise != "none":
+        begin = time.perf_counter()
+        trace = _denoised(pattern, trace, params.denoise)
+        timings.denoise = time.perf_counter() - begin
 
     recon = reconstruct(pattern, trace, params, used, tracer)
     traced = TracedCounts(grid=pattern.count, more=int(recon.traced_mask.sum()) - pattern.count)
+    alpha = region_values(recon.ids, trace.ids(params.rule_for(used)), trace.alpha, "mean")
+    pattern.put_traced(alpha, trace.alpha)
     if pilot is not None:  # auto's pilot traced these rows in full: keep them
         band = pilot.band.radiance.reshape(pilot.band_height, width, 3)
         check_radiance(band, "pilot pixels")
         before = int(recon.traced_mask.sum())
         recon.image[: len(band)] = band
+        alpha[: len(band)] = pilot.band.alpha.reshape(pilot.band_height, width)
         recon.traced_mask[: len(band)] = True
         traced.band = int(recon.traced_mask.sum()) - before
     timings.trace_more += recon.timings.trace_more
@@ -172,7 +184,16 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     skips.shadow_rays = int(not trace.shadow_rays)
     return MRTResult(recon.image, recon.ids, recon.traced_mask, pattern, trace, params,
                      trace.spp, mode, used, timings.close(time.perf_counter() - start),
-                     skips, dict(recon.stats), decision, traced)
+                     skips, dict(recon.stats), decision, traced, alpha)
+
+
+def _denoised(pattern: SamplePattern, trace: SparseTrace, denoiser: str) -> SparseTrace:
+    """``trace`` with its radiance denoised as the grid image it forms."""
+    grid = pattern.grid_shape + (3,)
+    normal = None if trace.normal is None else trace.normal.reshape(grid)
+    radiance = denoise_grid(trace.radiance.reshape(grid), trace.albedo.reshape(grid), normal,
+                            denoiser)
+    return replace(trace, radiance=np.asarray(radiance, dtype=np.float64).reshape(-1, 3))
 
 
 def _empty_trace(spp: int) -> SparseTrace:
@@ -180,13 +201,13 @@ def _empty_trace(spp: int) -> SparseTrace:
                        np.zeros(0, np.uint32), 0, spp, 0.0)
 
 
-def _full_result(image, ids, pattern, trace, params, spp, decision, timings,
+def _full_result(image, alpha, ids, pattern, trace, params, spp, decision, timings,
                  start) -> MRTResult:
     height, width = image.shape[:2]
     ids = np.zeros((height, width), dtype=np.int64) if ids is None else ids
     return MRTResult(image, ids, np.ones((height, width), dtype=bool), pattern, trace, params,
                      spp, "auto", "full", timings.close(time.perf_counter() - start),
-                     auto=decision, traced=TracedCounts(full=height * width))
+                     auto=decision, traced=TracedCounts(full=height * width), alpha=alpha)
 
 
 def _rest_in_full(pattern: SamplePattern, pilot: auto.Pilot, tracer: GridTracer,
@@ -204,11 +225,13 @@ def _rest_in_full(pattern: SamplePattern, pilot: auto.Pilot, tracer: GridTracer,
                        -1).reshape(-1, 2)
     rest = tracer(rest_xy, stream=SeedStream.REST, aovs=False)
     image = np.concatenate([pilot.band.radiance, rest.radiance]).reshape(height, width, 3)
+    alpha = np.concatenate([pilot.band.alpha, rest.alpha]).reshape(height, width)
     check_radiance(image, "pixels")
     sub = SamplePattern(width, height, pattern.rows[pilot.rows], pattern.cols)
     ids = sub.nearest_image(pilot.grid.ids(params.rule_for("fast")))
     timings = Timings(trace=pilot.grid.seconds, full_render=pilot.band.seconds + rest.seconds)
-    return _full_result(image, ids, pattern, pilot.grid, params, spp, decision, timings, start)
+    return _full_result(image, alpha, ids, pattern, pilot.grid, params, spp, decision, timings,
+                        start)
 
 
 def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
@@ -218,12 +241,17 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
     ``seconds`` is the whole call, as a user pays it (and as ``render``'s
     ``total`` is timed), the check for NaN and Inf included.
     """
+    image, _, seconds = _full_render(scene, unwrap(scene, integrator).nested,
+                                     resolve_sensor(scene, sensor), _check_spp(spp), seed)
+    return image, seconds
+
+
+def _full_render(scene, integrator, sensor, spp, seed) -> tuple[np.ndarray, np.ndarray, float]:
+    """``mi.render``: (RGB, alpha or None, seconds of the whole call)."""
     start = time.perf_counter()
-    nested = unwrap(scene, integrator).nested
-    sensor = resolve_sensor(scene, sensor)
-    image = mi.render(scene, integrator=nested, sensor=sensor, seed=seed,
-                      spp=_check_spp(spp) or 0)
+    image = mi.render(scene, integrator=integrator, sensor=sensor, seed=seed, spp=spp or 0)
     dr.eval(image)
-    image = np.array(image, dtype=np.float64)[..., :3]
-    check_radiance(image, "pixels of the full render")
-    return image, time.perf_counter() - start
+    image = np.array(image, dtype=np.float64)
+    check_radiance(image[..., :3], "pixels of the full render")
+    alpha = image[..., 3] if sensor.film().base_channels_count() == 4 else None
+    return image[..., :3], alpha, time.perf_counter() - start

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -141,14 +141,12 @@ def merge_rows(pattern: SamplePattern, rows_a: np.ndarray, trace_a: SparseTrace,
     def merge(a, b):
         both = np.concatenate([a.reshape(len(rows_a), nc, -1), b.reshape(len(rows_b), nc, -1)])
         return both[order].reshape((nr * nc,) + a.shape[1:])
-    optional = {name: None if getattr(trace_a, name) is None
-                else merge(getattr(trace_a, name), getattr(trace_b, name))
-                for name in ("path_id", "curved_mirror")}
-    return replace(trace_a, radiance=merge(trace_a.radiance, trace_b.radiance),
-                   albedo=merge(trace_a.albedo, trace_b.albedo),
-                   shape_index=merge(trace_a.shape_index, trace_b.shape_index),
-                   visible_lights=merge(trace_a.visible_lights, trace_b.visible_lights),
-                   seconds=0.0, **optional)
+    # every per-sample array (radiance, albedo, ids, alpha, ...), where both have it
+    per_sample = {f.name: merge(getattr(trace_a, f.name), getattr(trace_b, f.name))
+                  for f in fields(trace_a)
+                  if isinstance(getattr(trace_a, f.name), np.ndarray)
+                  and isinstance(getattr(trace_b, f.name), np.ndarray)}
+    return replace(trace_a, seconds=0.0, **per_sample)
 
 
 @functools.cache

@@ -6,12 +6,13 @@ into the pixels around it with the film's filter ``f`` (Mitsuba's default
 filter-weighted mean of the radiance around its centre,
 ``∫ f(x - c) L(x) dx / ∫ f(x - c) dx``.  The MRT traces only some pixels,
 so it places each traced pixel's samples around its centre with density
-proportional to ``|f|`` (a tabulated, separable distribution), splats them
-with the same filter, and weights each sample by ``1 / rho(x)``, where
-``rho`` is the density of all the samples of that trace at ``x``.  The
-expectation is then ``mi.render``'s for any set of traced pixels; when
-every pixel is traced, ``rho`` is nearly constant and the estimate is
-``mi.render``'s own.
+proportional to ``|f|`` (a tabulated, separable distribution) -- uniformly
+over the pixel, as ``mi.render`` does, where the neighbours its filter
+reaches are traced too -- splats them with the same filter, and weights
+each sample by ``1 / rho(x)``, where ``rho`` is the density of all the
+samples of that trace at ``x``.  The expectation is then ``mi.render``'s
+for any set of traced pixels, and when every pixel is traced the estimate
+is ``mi.render``'s own.
 """
 
 from __future__ import annotations

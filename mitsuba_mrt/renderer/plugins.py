@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -121,6 +123,10 @@ class MRTIntegrator(mi.SamplingIntegrator):
      * - rbf_degree
        - |int|
        - Polynomial degree added to the RBF: -1 (report), 0 or 1 (Default: -1).
+     * - denoise
+       - |string|
+       - ``oidn``: denoise the traced grid with Intel Open Image Denoise before
+         reconstructing it (needs ``pip install mitsuba-mrt[denoise]``) (Default: none).
      * - mode
        - |string|
        - Reconstruction: ``auto`` (``refine`` or ``idpass`` when a pilot
@@ -131,28 +137,29 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - Append the id AOV channels to the output (Default: true).
      * - (Nested plugin)
        - |integrator|
-       - The integrator that traces the sampled pixels (Default: ``path``).
+       - The integrator that traces the sampled pixels (Default: ``path``,
+         given any properties the wrapper does not know, e.g. ``max_depth``).
     """
 
     AOV_NAMES = AOV_NAMES
 
     def __init__(self, props=mi.Properties()):
         super().__init__(props)
-        nested = [props[name] for name in props.keys()
-                  if isinstance(props[name], mi.Integrator)]
+        names = list(props.keys())
+        nested = [name for name in names if isinstance(props[name], mi.Integrator)]
         if len(nested) > 1:
             raise MRTError("mrt: expected at most one nested integrator")
+        own = {f.name: f for f in fields(MRTParams)}
+        unknown = [name for name in names if name not in own and name not in nested
+                   and name not in ("mode", "aovs")]
         # The integrator that traces the grid-sampled pixels.
-        self.nested = nested[0] if nested else mi.load_dict({"type": "path"})
+        self.nested = props[nested[0]] if nested else _default_nested(unknown, props)
+        if nested and unknown:
+            raise MRTError(f"mrt: unknown properties {', '.join(unknown)} (give them to the "
+                           f"nested integrator)")
         # Reconstruction parameters, validated once here.
-        self.params = MRTParams(
-            sample_fraction=float(props.get("sample_fraction", 0.1)),
-            filter_sigma=float(props.get("filter_sigma", 1.0)),
-            filter_cutoff=float(props.get("filter_cutoff", 0.05)),
-            max_inpoints=int(props.get("max_inpoints", 2000)),
-            num_cappoints=int(props.get("num_cappoints", 10)),
-            id_rule=str(props.get("id_rule", "auto")),
-            rbf_degree=int(props.get("rbf_degree", -1)))
+        self.params = MRTParams(**{name: type(f.default)(props[name])
+                                   for name, f in own.items() if name in names})
         # Reconstruction mode (see mitsuba_mrt.renderer.api.render).
         self.mode = str(props.get("mode", "auto"))
         # Whether mi.render returns the id AOVs after R, G, B.
@@ -170,7 +177,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
                         seed=int(seed), params=self.params, mode=self.mode)
         self.last_result = result
         aovs = aov_images(result) if self.output_aovs else {}
-        return _develop(resolve_sensor(scene, sensor).film(), result.image,
+        return _develop(resolve_sensor(scene, sensor).film(), result.image, result.alpha,
                         [aovs[name] for name in self.aov_names()], self.aov_names())
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
@@ -185,10 +192,23 @@ class MRTIntegrator(mi.SamplingIntegrator):
         return f"MRTIntegrator[{fields},\n  nested={self.nested}]"
 
 
-def _develop(film, image: np.ndarray, aovs: list, names: list) -> mi.TensorXf:
-    """Put ``image`` and ``aovs`` into ``film`` and develop it, as Mitsuba's own
-    integrators do, so that ``film.bitmap()`` and ``film.write()`` see the MRT's
-    image; returns the developed tensor (R, G, B, then the AOVs).
+def _default_nested(names: list, props) -> mi.Integrator:
+    """Mitsuba's ``path`` integrator, with the properties the wrapper does not
+    know (``max_depth`` ...); an error naming them if ``path`` does not know
+    them either."""
+    try:
+        return mi.load_dict({"type": "path", **{name: props[name] for name in names}})
+    except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain Exceptions
+        raise MRTError(f"mrt: properties {', '.join(names)} are neither the mrt integrator's "
+                       f"nor its default nested path integrator's") from exc
+
+
+def _develop(film, image: np.ndarray, alpha: np.ndarray | None, aovs: list,
+             names: list) -> mi.TensorXf:
+    """Put ``image`` (and ``alpha`` for an RGBA film) and ``aovs`` into ``film``
+    and develop it, as Mitsuba's own integrators do, so that ``film.bitmap()``
+    and ``film.write()`` see the MRT's image; returns the developed tensor
+    (R, G, B, [A,] then the AOVs).
 
     Each pixel is one sample of weight 1 at the pixel's own position, so the
     developed values are the given ones.
@@ -200,7 +220,10 @@ def _develop(film, image: np.ndarray, aovs: list, names: list) -> mi.TensorXf:
                        f"(expected RGB or RGBA)")
     height, width = image.shape[:2]
     ones = np.ones((height, width, 1))
-    parts = [image] + [ones] * (base - 3) + [a[..., None] for a in aovs]
+    if alpha is None:
+        alpha = ones[..., 0]
+    parts = [image] + ([alpha[..., None]] if base == 5 else []) + [ones] \
+        + [a[..., None] for a in aovs]
     block = mi.ImageBlock(mi.TensorXf(np.concatenate(parts, axis=-1).astype(np.float32)),
                           offset=film.crop_offset(), rfilter=film.rfilter(), border=False)
     film.put_block(block)

@@ -33,8 +33,12 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
 
 def _first_line(exc: Exception) -> str:
     """The first non-empty line of an exception's message, joined with the next
-    when it ends in a colon (Mitsuba puts the detail on the following line)."""
+    when it ends in a colon (Mitsuba puts the detail on the following line);
+    an error this package raised inside Mitsuba (a plugin's), as it said it."""
     lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    ours = [line for line in lines if "MRTError: " in line]
+    if ours:
+        return ours[-1].split("MRTError: ", 1)[1]
     if not lines:
         return type(exc).__name__
     if lines[0].endswith(":") and len(lines) > 1:

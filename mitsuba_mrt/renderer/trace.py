@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+from scipy.ndimage import minimum_filter
 
 from ..errors import MRTError
 from ..types import SparseTrace
@@ -159,6 +160,13 @@ def _rgb(value, wavelengths, active=True):
 
 
 def _directional_albedo(scene, sampler, ray, active):
+    """(albedo, hit): see :func:`_albedo_along`; ``hit`` where the camera ray hit."""
+    si = scene.ray_intersect(ray, active)
+    hit = si.is_valid() if is_jit() else bool(active and si.is_valid())
+    return _albedo_along(scene, sampler, ray, active), hit
+
+
+def _albedo_along(scene, sampler, ray, active):
     """What multiplies the light arriving at the first hit: its BSDF's albedo
     for the view direction, one BSDF sample's weight, clamped to [0, 1] (RGB).
 
@@ -285,6 +293,10 @@ def _shape_lookup(scene: mi.Scene):
 #: pixel; all of them when a pixel has fewer), and per pixel of an albedo-only pass.
 ALBEDO_SAMPLES = 4
 
+#: Albedo (per channel) below which a pixel is not demodulated: dividing by
+#: it would turn the noise of a nearly black surface into huge values.
+ALBEDO_MIN = 0.01
+
 #: Channels of the image block the samples are developed in: weighted RGB,
 #: alpha, the weight, RGB squared (for the variance), albedo and its weight,
 #: and the count of samples whose radiance was NaN or Inf.
@@ -345,12 +357,15 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
             samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
                               seed, True)
         if aovs:
-            shape_index, visible, path_id = (_ids_jit if is_jit() else _ids_scalar)(
+            shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
                 scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule)
         else:
-            shape_index, visible, path_id = zero, np.zeros(n, np.uint32), zero
+            shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if not (radiance or aovs):
         samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)))
+    if aovs:  # only a surface seen at the pixel's centre is demodulated, and not a black one
+        samples.albedo[shape_index == 0] = 0.0
+        samples.albedo[samples.albedo < ALBEDO_MIN] = 0.0
     curved = curved_mirror_indices(scene) if aovs else np.zeros(0, np.int64)
     return SparseTrace(samples.radiance if radiance else np.zeros((n, 3)),
                        samples.albedo if aovs else np.zeros((n, 3)), shape_index, visible,
@@ -358,14 +373,26 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        shadow_rays=rule == "rays", path_id=path_id,
                        curved_mirror=np.isin(shape_index, curved) if len(curved) else None,
                        alpha=samples.alpha if radiance else None,
-                       variance=samples.variance if radiance else None)
+                       variance=samples.variance if radiance else None, normal=normal)
 
 
-def _occupancy(pixel_xy: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(height * width,) float32: 1 at the traced pixels."""
-    occupied = np.zeros(height * width, dtype=np.float32)
-    occupied[pixel_xy[:, 1] * width + pixel_xy[:, 0]] = 1.0
-    return occupied
+#: How a traced pixel's samples are placed (see :func:`_occupancy`).
+FILTERED, SQUARE = 1, 2
+
+
+def _occupancy(pixel_xy: np.ndarray, width: int, height: int, reach: int) -> np.ndarray:
+    """(height * width,) float32: how each pixel's samples are placed.
+
+    0 where the pixel is not traced; ``SQUARE`` (uniformly over the pixel,
+    as ``mi.render`` places them) where every pixel that the filter of its
+    centre reaches is traced too, so that their squares cover its filter;
+    ``FILTERED`` (distributed like the filter) elsewhere.  Pixels outside
+    the image count as traced: no sample is taken there.
+    """
+    traced = np.zeros((height, width), dtype=bool)
+    traced[pixel_xy[:, 1], pixel_xy[:, 0]] = True
+    covered = minimum_filter(traced, size=2 * reach + 1, mode="constant", cval=True)
+    return np.where(traced, np.where(covered, SQUARE, FILTERED), 0).astype(np.float32).ravel()
 
 
 def _read_block(tensor: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
@@ -412,24 +439,30 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         inside = (k >= 0) & (k < len(table.pdf))
         return dr.gather(mi.Float, pdf, mi.UInt32(dr.maximum(k, 0)), inside)
 
+    reach = int(np.ceil(table.radius - 0.5))
+    kinds = _occupancy(pixel_xy, width, height, reach)
+    occupied = mi.Float(kinds)
     u = sampler.next_2d()
     pixel = mi.Point2f(dr.gather(mi.Float, mi.Float(pixel_xy[:, 0]), owner),
                        dr.gather(mi.Float, mi.Float(pixel_xy[:, 1]), owner))
-    position = pixel + 0.5 + mi.Point2f(offset(u.x), offset(u.y))
+    square = dr.gather(mi.Float, mi.Float(kinds[pixel_xy[:, 1] * width + pixel_xy[:, 0]]),
+                       owner) == SQUARE
+    position = dr.select(square, pixel + u,
+                         pixel + 0.5 + mi.Point2f(offset(u.x), offset(u.y)))
     active = mi.Bool(True) if film.sample_border() else (
         (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
     # the density of all of this trace's samples at each sample's position
-    occupied = mi.Float(_occupancy(pixel_xy, width, height))
-    reach = int(np.ceil(table.radius - 0.5))
     base_x, base_y = mi.Int32(dr.floor(position.x)), mi.Int32(dr.floor(position.y))
     rho = mi.Float(0.0)
     for oy in range(-reach, reach + 1):
         for ox in range(-reach, reach + 1):
             qx, qy = base_x + ox, base_y + oy
             ok = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-            there = dr.gather(mi.Float, occupied, mi.UInt32(dr.maximum(qy * width + qx, 0)), ok)
-            rho += there * density(position.x - (mi.Float(qx) + 0.5)) \
+            kind = dr.gather(mi.Float, occupied, mi.UInt32(dr.maximum(qy * width + qx, 0)), ok)
+            spread = density(position.x - (mi.Float(qx) + 0.5)) \
                 * density(position.y - (mi.Float(qy) + 0.5))
+            rho += dr.select(kind == SQUARE, 1.0 if (ox, oy) == (0, 0) else 0.0,
+                             dr.select(kind == FILTERED, spread, 0.0))
     active &= rho > 0.0
     weight = dr.select(active, dr.rcp(rho * spp), 0.0)
 
@@ -444,10 +477,10 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         rgb = dr.select(active & finite, rgb, 0.0)
         alpha = dr.select(active & valid, 1.0, 0.0)
     a_weight, a_rgb = zero, mi.Color3f(0.0)
-    if albedo:
+    if albedo:  # averaged over the samples that hit a surface
         first = active & ((lane % spp) < min(spp, ALBEDO_SAMPLES))
-        a_rgb = _directional_albedo(scene, sampler, ray, first)
-        a_weight = dr.select(first, weight, 0.0)
+        a_rgb, hit = _directional_albedo(scene, sampler, ray, first)
+        a_weight = dr.select(first & hit, weight, 0.0)
     block = _new_block(film)
     block.put(position + mi.ScalarVector2f(film.crop_offset()),
               [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
@@ -462,21 +495,28 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     table = filter_table(film.rfilter())
-    occupied = _occupancy(pixel_xy, width, height).reshape(height, width)
     reach = int(np.ceil(table.radius - 0.5))
+    kinds = _occupancy(pixel_xy, width, height, reach).reshape(height, width)
     offset = mi.ScalarVector2f(film.crop_offset())
     block = _new_block(film)
     for k, (x, y) in enumerate(pixel_xy.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
         for s in range(spp):
             u = sampler.next_2d()
-            px = x + 0.5 + float(table.sample(np.array([u[0]]))[0])
-            py = y + 0.5 + float(table.sample(np.array([u[1]]))[0])
+            if kinds[y, x] == SQUARE:
+                px, py = x + u[0], y + u[1]
+            else:
+                px = x + 0.5 + float(table.sample(np.array([u[0]]))[0])
+                py = y + 0.5 + float(table.sample(np.array([u[1]]))[0])
             inside = film.sample_border() or (0 <= px < width and 0 <= py < height)
             rho = 0.0
             for qy in range(int(np.floor(py)) - reach, int(np.floor(py)) + reach + 1):
                 for qx in range(int(np.floor(px)) - reach, int(np.floor(px)) + reach + 1):
-                    if 0 <= qx < width and 0 <= qy < height and occupied[qy, qx]:
+                    if not (0 <= qx < width and 0 <= qy < height) or not kinds[qy, qx]:
+                        continue
+                    if kinds[qy, qx] == SQUARE:
+                        rho += float(qx == int(np.floor(px)) and qy == int(np.floor(py)))
+                    else:
                         rho += float(table.density(px - qx - 0.5) * table.density(py - qy - 0.5))
             if not (inside and rho > 0.0):
                 sampler.advance()
@@ -492,8 +532,8 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
                     rgb, invalid = np.zeros(3), 1.0
             a_rgb, a_weight = np.zeros(3), 0.0
             if albedo and s < ALBEDO_SAMPLES:
-                a_rgb = np.asarray(_directional_albedo(scene, sampler, ray, True), np.float64)
-                a_weight = weight
+                a_rgb, hit = _directional_albedo(scene, sampler, ray, True)
+                a_rgb, a_weight = np.asarray(a_rgb, np.float64), weight if hit else 0.0
             values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
                                      a_weight * a_rgb, [a_weight, invalid]])
             block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
@@ -508,7 +548,8 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
     ray, _ = _camera_ray(sensor, sampler, position, 1, centre=True)
     si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, has_mirrors(scene))
     pointers = dr.reinterpret_array(mi.UInt32, si.shape)
-    dr.eval(mask, pointers, chain)
+    normal = dr.select(valid, si.sh_frame.n, 0.0)
+    dr.eval(mask, pointers, chain, normal)
     keys, indices = lookup
 
     def to_index(ptr):
@@ -523,7 +564,7 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
                       np.where(to_index(ptr) > 0, to_index(ptr), len(keys) + 1), 0)
              for bounced, ptr in chain]
     return (shape_index, _to_numpy(mask, n).astype(np.uint32),
-            _path_ids(shape_index, steps, len(keys)))
+            _path_ids(shape_index, steps, len(keys)), _to_numpy(normal, n))
 
 
 def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
@@ -531,6 +572,7 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
     n = len(pixel_xy)
     shape_index = np.zeros(n, dtype=np.int64)
     visible = np.zeros(n, dtype=np.uint32)
+    normal = np.zeros((n, 3))
     mirrors = has_mirrors(scene)
     steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
     for k, (x, y) in enumerate(pixel_xy.tolist()):
@@ -539,6 +581,7 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
         if valid:
             shape_index[k] = lookup.get(id(si.shape), 0)
             visible[k] = int(mask)
+            normal[k] = np.asarray(si.sh_frame.n, dtype=np.float64)
             for b, (_, shape) in enumerate(chain):
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
-    return shape_index, visible, _path_ids(shape_index, steps, len(lookup))
+    return shape_index, visible, _path_ids(shape_index, steps, len(lookup)), normal

@@ -27,7 +27,7 @@ def test_render_writes_every_output(tmp_path):
     assert summary["width"] == summary["height"] == 48  # -D res=48 took effect
     assert summary["sample_fraction"] == 0.2
     timings = summary["timings"]
-    assert set(timings) == {"trace", "trace_more", "edges", "interpolate", "full_render",
+    assert set(timings) == {"trace", "trace_more", "denoise", "edges", "interpolate", "full_render",
                             "other", "total"}
     # the parts add up to the total
     assert sum(v for k, v in timings.items() if k != "total") == pytest.approx(timings["total"])

@@ -1,0 +1,168 @@
+"""What ordinary Mitsuba scenes use: pixel filters, alpha, spectra, misses,
+the mrt element's parameters."""
+
+import json
+import subprocess
+import sys
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import mitsuba_mrt
+from mitsuba_mrt import MRTError
+from mitsuba_mrt.recon.metrics import paper_error
+
+from conftest import ROOT
+
+
+def path_scene(res=24, rfilter="", rgba=False, spp=16, extra=""):
+    """A sphere on a floor under a point light and a constant sky, rendered with path."""
+    fmt = '<string name="pixel_format" value="rgba"/>' if rgba else ""
+    return f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 1, 6" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/>
+      {fmt}{rfilter}</film></sensor>
+  <shape type="sphere" id="ball"><bsdf type="diffuse"><rgb name="reflectance" value="0.8,0.3,0.2"/></bsdf></shape>
+  <shape type="rectangle" id="floor"><transform name="to_world"><rotate x="1" angle="-90"/>
+    <scale value="2"/><translate y="-1"/></transform><bsdf type="diffuse"/></shape>
+  <emitter type="point"><point name="position" x="2" y="3" z="3"/><rgb name="intensity" value="30"/></emitter>
+  {extra}
+</scene>"""
+
+
+def errors_at_full_fraction(scene, seeds=3):
+    """Error against a converged render of mi.render and of the MRT at f = 1."""
+    converged = np.mean([mitsuba_mrt.render_reference(scene, spp=512, seed=100 + k)[0]
+                         for k in range(2)], axis=0)
+    full = [paper_error(mitsuba_mrt.render_reference(scene, seed=s)[0], converged)
+            for s in range(seeds)]
+    mrt = [paper_error(mitsuba_mrt.render(scene, mode="fast", sample_fraction=1.0,
+                                          seed=s).image, converged) for s in range(seeds)]
+    return np.mean(full), np.mean(mrt)
+
+
+@pytest.mark.parametrize("rfilter", ["", '<rfilter type="box"/>', '<rfilter type="tent"/>',
+                                     '<rfilter type="mitchell"/>'])
+def test_every_pixel_traced_is_mi_render_up_to_noise(variant, rfilter):
+    # the default filter is gaussian: samples follow the filter, splatted like mi.render's
+    full, mrt = errors_at_full_fraction(mi.load_string(path_scene(rfilter=rfilter)))
+    assert mrt == pytest.approx(full, rel=0.05)
+
+
+def test_box_filter_at_full_fraction_is_mi_render_exactly(variant):
+    scene = mi.load_string(path_scene(rfilter='<rfilter type="box"/>'))
+    reference, _ = mitsuba_mrt.render_reference(scene, seed=3)
+    result = mitsuba_mrt.render(scene, mode="fast", sample_fraction=1.0, seed=3)
+    assert np.allclose(result.image, reference, rtol=1e-5, atol=1e-6)
+
+
+def test_alpha_is_traced_and_reconstructed(variant):
+    scene = mi.load_string(path_scene(rgba=True))
+    reference = np.array(mi.render(scene, spp=64))
+    assert reference.shape[2] == 4 and reference[..., 3].min() == 0.0  # the sky
+    full = mitsuba_mrt.render(scene, mode="fast", sample_fraction=1.0)
+    assert np.abs(full.alpha - reference[..., 3]).mean() < 0.01
+    for mode, tolerance in (("fast", 0.15), ("refine", 0.06), ("idpass", 0.06)):
+        result = mitsuba_mrt.render(scene, mode=mode, sample_fraction=0.2)
+        assert result.alpha.min() == 0.0 and result.alpha.max() == 1.0
+        assert np.abs(result.alpha - reference[..., 3]).mean() < tolerance
+        assert result.alpha[0, 0] == 0.0  # the sky, far from any shape
+
+
+def test_mi_render_with_the_mrt_integrator_gives_alpha(variant):
+    scene = mi.load_string(path_scene(rgba=True))
+    mrt = mi.load_dict({"type": "mrt", "mode": "fast", "nested": scene.integrator()})
+    image = np.array(mi.render(scene, integrator=mrt))
+    assert image.shape[2] == 4 + len(mitsuba_mrt.renderer.aovs.AOV_NAMES)
+    assert image[..., 3].min() == 0.0 and image[..., 3].max() == 1.0
+
+
+@pytest.mark.parametrize("spectral", ["llvm_ad_spectral", "scalar_spectral"])
+def test_spectral_variants_give_the_rgb_mi_render_gives(variant, spectral):
+    if spectral.startswith("llvm") and not variant.startswith("llvm"):
+        pytest.skip("needs the LLVM backend")
+    res = 16 if spectral.startswith("llvm") else 8
+    try:
+        mi.set_variant(spectral)
+        scene = mi.load_string(path_scene(res=res, spp=64))
+        reference = np.mean([mitsuba_mrt.render_reference(scene, seed=s)[0] for s in range(2)],
+                            axis=0)
+        full = mitsuba_mrt.render(scene, mode="fast", sample_fraction=1.0).image
+        sparse = mitsuba_mrt.render(scene, mode="refine", sample_fraction=0.3).image
+    finally:
+        mi.set_variant(variant)
+    assert full.shape == reference.shape == (res, res, 3)
+    assert np.abs(full.mean(axis=(0, 1)) - reference.mean(axis=(0, 1))).max() < 0.05
+    assert np.isfinite(sparse).all()
+
+
+def test_scalar_variant_survives_rays_that_miss(variant):
+    try:
+        mi.set_variant("scalar_rgb")
+        scene = mi.load_string(path_scene(res=8, spp=2))  # the sky is a miss
+        for mode in ("refine", "bicubic", "idpass"):
+            image = mitsuba_mrt.render(scene, mode=mode, sample_fraction=0.5).image
+            assert np.isfinite(image).all()
+    finally:
+        mi.set_variant(variant)
+
+
+def test_rough_metal_has_no_speckle(variant):
+    # the albedo of a rough conductor is its directional albedo (<= 1), so the
+    # demodulated radiance is smooth and the reconstruction beats bicubic
+    metal = '''<shape type="sphere" id="metal"><point name="center" x="0" y="0" z="0"/>
+      <float name="radius" value="1.001"/><bsdf type="roughconductor"><string name="material" value="Cu"/>
+      <float name="alpha" value="0.2"/></bsdf></shape>'''
+    xml = path_scene(res=48, spp=64, extra='<emitter type="constant"><rgb name="radiance" value="0.3"/></emitter>')
+    xml = xml.replace('<shape type="sphere" id="ball"><bsdf type="diffuse"><rgb name="reflectance" value="0.8,0.3,0.2"/></bsdf></shape>', metal)
+    scene = mi.load_string(xml)
+    converged = mitsuba_mrt.render_reference(scene, spp=1024)[0]
+    result = mitsuba_mrt.render(scene, mode="refine", sample_fraction=0.15)
+    bicubic = mitsuba_mrt.render(scene, mode="bicubic", sample_fraction=0.15)
+    assert result.trace.albedo.max() <= 1.0
+    assert paper_error(result.image, converged) < paper_error(bicubic.image, converged)
+
+
+def test_xml_parameters_of_the_mrt_element_reach_the_cli(tmp_path):
+    scene = tmp_path / "wrapped.xml"
+    scene.write_text(path_scene(res=20, spp=4).replace(
+        '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
+        '<integrator type="mrt"><string name="mode" value="bicubic"/>'
+        '<float name="sample_fraction" value="0.25"/>'
+        '<integer name="max_depth" value="3"/></integrator>'))
+    proc = subprocess.run([sys.executable, "-m", "mitsuba_mrt", "render", str(scene), "-o",
+                           str(tmp_path / "out"), "--no-reference", "--json"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["mode_used"] == "bicubic" and summary["sample_fraction"] == 0.25
+    proc = subprocess.run([sys.executable, "-m", "mitsuba_mrt", "render", str(scene), "-o",
+                           str(tmp_path / "out"), "--no-reference", "--json",
+                           "--sample-fraction", "0.5"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert json.loads(proc.stdout)["sample_fraction"] == 0.5  # the option overrides
+
+
+def test_unknown_properties_reach_the_default_nested_integrator_or_fail(variant):
+    wrapper = mi.load_dict({"type": "mrt", "max_depth": 3})
+    assert "max_depth = 3" in str(wrapper.nested)
+    with pytest.raises(Exception, match="bogus"):
+        mi.load_dict({"type": "mrt", "bogus": 3})
+    with pytest.raises(Exception, match="give them to the nested integrator"):
+        mi.load_dict({"type": "mrt", "max_depth": 3, "nested": {"type": "path"}})
+
+
+def test_unknown_property_error_is_one_line_from_the_cli(tmp_path):
+    scene = tmp_path / "bad.xml"
+    scene.write_text(path_scene(res=8).replace(
+        '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
+        '<integrator type="mrt"><integer name="bogus" value="3"/></integrator>'))
+    proc = subprocess.run([sys.executable, "-m", "mitsuba_mrt", "render", str(scene), "-o",
+                           str(tmp_path / "out")], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 2 and "bogus" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
