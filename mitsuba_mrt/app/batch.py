@@ -607,7 +607,7 @@ def run_batch(scenes, out_dir, defines=(), *, scheduler: str | None = None,
         if row is not None:
             rows[task.name] = row
     todo = [t for t in tasks if t.name not in rows]
-    echo(f"batch: {len(tasks)} tasks into {out}"
+    echo(f"batch: {len(tasks)} task{'s' if len(tasks) > 1 else ''} into {out}"
          + (f", {len(tasks) - len(todo)} already complete (skipped)" if len(todo) < len(tasks)
             else ""))
     columns = table_columns(tasks)
