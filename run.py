@@ -38,7 +38,8 @@ def setup() -> None:
     if not STAMP.exists() or STAMP.read_text() != digest:
         say("installing mitsuba-mrt and its dependencies")
         subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
-        subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test]"],
+        # with the batch extra, so that the test suite covers the batch command
+        subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "-e", f"{ROOT}[test,batch]"],
                        check=True)
         STAMP.write_text(digest)
     ensure_llvm()

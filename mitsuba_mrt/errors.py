@@ -7,3 +7,18 @@ class MRTError(ValueError):
     It subclasses :class:`ValueError` so that callers who validate arguments
     the usual Python way catch it too.
     """
+
+
+def one_line(exc: BaseException) -> str:
+    """``exc`` as one terminal line: an MRTError's message, else ``Type: first line``.
+
+    Examples
+    --------
+    >>> one_line(MRTError("scene file not found: a.xml"))
+    'scene file not found: a.xml'
+    >>> one_line(RuntimeError("boom\\nmore detail"))
+    'RuntimeError: boom'
+    """
+    lines = str(exc).strip().splitlines()
+    first = lines[0] if lines else ""
+    return first if isinstance(exc, MRTError) else f"{type(exc).__name__}: {first}"

@@ -176,7 +176,7 @@ def circle_points(n, radius, z):
     return [(radius * math.cos(a), radius * math.sin(a), z) for a in t]
 
 
-def header(title, lines):
+def header(title, lines, orbit=False):
     """Build the XML prolog and the header comment of a scene file.
 
     Parameters
@@ -185,6 +185,8 @@ def header(title, lines):
         One-line description of the scene.
     lines : list of str
         Further comment lines (already indented as wanted).
+    orbit : bool
+        List the ``azimuth`` parameter of :func:`sensor`.
 
     Returns
     -------
@@ -205,13 +207,20 @@ def header(title, lines):
         "    spp         samples per pixel (1: one ray through each pixel centre)",
         "    integrator  integrator plugin; 'matte' is registered by mitsuba_mrt",
         "    jitter      jitter the stratified samples (false: pixel centres)",
+    ]
+    if orbit:
+        out += [
+            "    azimuth     camera angle about the vertical axis through the origin,",
+            "                degrees (0: the report's view; 90: the camera on +x)",
+        ]
+    out += [
         "  Image row r, column c is the report's pixel (i, j) = (c, res - 1 - r).",
         "-->",
     ]
     return out
 
 
-def sensor(eye_z, lines):
+def sensor(eye_z, lines, orbit=False):
     """Append the camera, sampler and film of the report's eye.
 
     Parameters
@@ -220,6 +229,10 @@ def sensor(eye_z, lines):
         z of the eye, ``+25`` (looking towards -z) or ``-25`` (towards +z).
     lines : list of str
         Output lines, extended in place.
+    orbit : bool
+        Turn the camera by ``$azimuth`` degrees about the world's y axis
+        through the origin, after the lookat: the camera orbits the scene
+        centre at the eye's distance, still looking at it.
     """
     fov = math.degrees(2.0 * math.atan(0.5 * WINDOW_SIZE / EYE_DISTANCE))
     lines += [
@@ -245,6 +258,14 @@ def sensor(eye_z, lines):
     lines += [
         f'            <lookat origin="0, 0, {fmt(eye_z)}" target="0, 0, 0"'
         ' up="0, 1, 0"/>',
+    ]
+    if orbit:
+        lines += [
+            "            <!-- Orbit: the eye turns about the y axis through the origin,",
+            "                 still looking at it (azimuth 90 puts it on +x). -->",
+            '            <rotate y="1" angle="$azimuth"/>',
+        ]
+    lines += [
         "        </transform>",
         '        <sampler type="stratified">',
         '            <integer name="sample_count" value="$spp"/>',
@@ -365,7 +386,7 @@ def emitters(lights, lines):
 
 
 def scene(title, notes, res, eye_z, spheres, planes, lights, plane_half_size,
-          mirror=None):
+          mirror=None, orbit=False):
     """Build the complete text of one scene file.
 
     Parameters
@@ -384,13 +405,15 @@ def scene(title, notes, res, eye_z, spheres, planes, lights, plane_half_size,
         Half side of the plane rectangles, see :func:`shapes`.
     mirror : int or None
         Sphere made a perfect mirror, see :func:`shapes`.
+    orbit : bool
+        A ``$azimuth`` parameter (default 0) orbits the camera, see :func:`sensor`.
 
     Returns
     -------
     str
         The XML document, ending with a newline.
     """
-    lines = header(title, notes)
+    lines = header(title, notes, orbit)
     lines += [
         '<scene version="3.0.0">',
         f'    <default name="res" value="{res}"/>',
@@ -398,7 +421,9 @@ def scene(title, notes, res, eye_z, spheres, planes, lights, plane_half_size,
         '    <default name="integrator" value="matte"/>',
         '    <default name="jitter" value="false"/>',
     ]
-    sensor(eye_z, lines)
+    if orbit:
+        lines += ['    <default name="azimuth" value="0"/>']
+    sensor(eye_z, lines, orbit)
     shapes(spheres, planes, plane_half_size, lines, mirror)
     emitters(lights, lines)
     lines += ["</scene>", ""]
@@ -413,7 +438,7 @@ def scene_specs():
     dict
         File name -> keyword arguments of :func:`scene` (``title``,
         ``notes``, ``res``, ``eye_z``, ``spheres``, ``planes``, ``lights``,
-        ``plane_half_size``, ``mirror``), in a fixed order.
+        ``plane_half_size``, ``mirror``, optionally ``orbit``), in a fixed order.
         ``tools/check_scenes.py`` uses the same description for its analytic
         reference.
     """
@@ -426,9 +451,19 @@ def scene_specs():
     ]
     fig1 = dict(res=400, eye_z=EYE_DISTANCE, spheres=FIG1_SPHERES,
                 planes=FIG1_PLANES, lights=FIG1_LIGHTS,
-                plane_half_size=PLANE_HALF_SIZE, mirror=None)
+                plane_half_size=PLANE_HALF_SIZE, mirror=None, orbit=False)
     specs["paper_fig1.xml"] = dict(
         fig1, title="Scene of the report's Fig. 1.", notes=fig1_notes)
+    specs["paper_fig1_orbit.xml"] = dict(
+        fig1, orbit=True,
+        title="Fig. 1 scene seen from a camera orbiting its centre (not in the report).",
+        notes=fig1_notes[-1:] + [
+            "At azimuth 0 (the default) it is paper_fig1.xml.  An orbit is a batch:",
+            "python -m mitsuba_mrt batch scenes_xml/paper_fig1_orbit.xml -o out/orbit",
+            "    -D azimuth=-60:121:15 -D res=200",
+            "Between about -60 and 120 degrees the camera sees the planes' lit",
+            "side; from about 150 to 270 their black backs (the report's planes",
+            "are one-sided) fill the view."])
     specs["paper_fig1_conductor.xml"] = dict(
         fig1, mirror=MIRROR_SPHERE,
         title="Fig. 1 scene with one sphere a perfect mirror (not in the report).",

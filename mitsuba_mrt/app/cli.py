@@ -10,7 +10,7 @@ import argparse
 import json
 import sys
 
-from ..errors import MRTError
+from ..errors import MRTError, one_line
 from ..renderer.variants import VARIANT_CHOICES
 from ..types import DENOISERS
 
@@ -59,6 +59,34 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
                         "Image Denoise (pip install mitsuba-mrt[denoise]) (none)")
 
 
+def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) -> None:
+    """The options of a render job, shared by ``render`` and ``batch``."""
+    if batch:
+        parser.add_argument("-D", dest="defines", action="append", type=_define, default=[],
+                            metavar="NAME=VALUES",
+                            help="set a scene <default> parameter: a value, a comma list "
+                                 "(res=200,400) or a range start:stop:step, stop exclusive "
+                                 "(azimuth=0:360:15); several -D make every combination")
+    else:
+        parser.add_argument("-D", dest="defines", action="append", type=_define, default=[],
+                            metavar="NAME=VALUE", help="set a scene <default> parameter")
+    parser.add_argument("--spp", type=int, default=None,
+                        help="samples per traced pixel (default: the scene's sampler)")
+    parser.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    parser.add_argument("--variant", choices=VARIANT_CHOICES, default="auto",
+                        help="Mitsuba variant; auto: LLVM if libLLVM >= 17, else scalar")
+    parser.add_argument("--no-reference", action="store_true",
+                        help="skip the full reference render (no error, no PSNR)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the JSON summary" + (" of every task" if batch else ""))
+    parser.add_argument("--mode", default=None, metavar="MODE",
+                        help="reconstruction mode: " + ", ".join(_modes())
+                             + "; auto: refine or idpass when a measured pilot says it beats "
+                               "a full render, else the full render (default: the scene's mrt "
+                               "integrator's mode, else auto)")
+    _add_mrt_options(parser)
+
+
 def _modes() -> list[str]:
     from ..modes import MODES
 
@@ -72,22 +100,21 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="MRT render of a scene, with the full reference")
     r.add_argument("scene", help="Mitsuba XML scene file")
     r.add_argument("-o", "--output", default="out", help="output folder (default %(default)s)")
-    r.add_argument("-D", dest="defines", action="append", type=_define, default=[],
-                   metavar="NAME=VALUE", help="set a scene <default> parameter")
-    r.add_argument("--spp", type=int, default=None,
-                   help="samples per traced pixel (default: the scene's sampler)")
-    r.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
-    r.add_argument("--variant", choices=VARIANT_CHOICES, default="auto",
-                   help="Mitsuba variant; auto: LLVM if libLLVM >= 17, else scalar")
-    r.add_argument("--no-reference", action="store_true",
-                   help="skip the full reference render (no error, no PSNR)")
-    r.add_argument("--json", action="store_true", help="print the JSON summary")
-    r.add_argument("--mode", default=None, metavar="MODE",
-                   help="reconstruction mode: " + ", ".join(_modes())
-                        + "; auto: refine or idpass when a measured pilot says it beats a "
-                          "full render, else the full render (default: the scene's mrt "
-                          "integrator's mode, else auto)")
-    _add_mrt_options(r)
+    _add_render_options(r)
+
+    s = sub.add_parser("batch", help="render every scene x every combination of -D values "
+                       "on a Dask cluster, a folder each, with a table (needs the batch extra)")
+    s.add_argument("scenes", nargs="+", metavar="SCENE", help="Mitsuba XML scene files")
+    s.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="output folder: OUT/<scene>_<name>=<value>.../ per task, "
+                        "OUT/batch.csv, OUT/<scene>.gif when one parameter varies")
+    _add_render_options(s, batch=True)
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="a running Dask scheduler (tcp://host:8786); default: a local "
+                        "cluster on this machine")
+    s.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="worker processes of the local cluster (default: one per core)")
+    s.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     from ..bench import EXPERIMENTS
 
@@ -124,14 +151,43 @@ def _param_overrides(args) -> dict:
     return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
 
 
+def _job_options(args) -> dict:
+    """The fields of a RenderJob beyond scene, folder and defines."""
+    return dict(param_overrides=_param_overrides(args), spp=args.spp, seed=args.seed,
+                variant=args.variant, reference=not args.no_reference, mode=args.mode)
+
+
 def _render(args) -> int:
     from .job import RenderJob, run_render_job, summary_line
 
     job = RenderJob(scene=args.scene, out_dir=args.output, defines=dict(args.defines),
-                    param_overrides=_param_overrides(args), spp=args.spp, seed=args.seed,
-                    variant=args.variant, reference=not args.no_reference, mode=args.mode)
+                    **_job_options(args))
     summary = run_render_job(job)
     print(json.dumps(summary.as_dict(), indent=2) if args.json else summary_line(summary))
+    return 0
+
+
+def _batch(args) -> int:
+    from .batch import run_batch
+
+    result = run_batch(args.scenes, args.output, args.defines, scheduler=args.scheduler,
+                       workers=args.workers, progress=not args.no_progress,
+                       echo=(lambda line: print(line, file=sys.stderr)) if args.json else print,
+                       **_job_options(args))
+    if args.json:
+        print(json.dumps(result.rows, indent=2))
+    else:
+        done = len(result.rows) - result.failed - result.count("skipped")
+        print(f"batch: {done} rendered, {result.count('skipped')} skipped, "
+              f"{result.failed} failed; table {result.table}")
+        for gif in result.animations:
+            print(f"animation {gif}")
+    for note in result.notes:
+        print(note, file=sys.stderr)
+    if result.failed:
+        print(f"error: {result.failed} of {len(result.rows)} tasks failed "
+              f"(messages in {result.table})", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -158,7 +214,7 @@ def main(argv=None) -> int:
 
     configure()
     try:
-        return {"render": _render, "bench": _bench}[args.command](args)
+        return {"render": _render, "batch": _batch, "bench": _bench}[args.command](args)
     except MRTError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -166,6 +222,5 @@ def main(argv=None) -> int:
         print("error: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - never a traceback on the terminal
-        message = str(exc).strip().splitlines()
-        print(f"error: {type(exc).__name__}: {message[0] if message else ''}", file=sys.stderr)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
         return 1
