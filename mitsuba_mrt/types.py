@@ -279,6 +279,7 @@ class SeedStream(enum.IntEnum):
     PILOT = 2
     ID_PASS = 3
     SLIVERS = 4
+    ROUGH = 5
 
 
 class Tracer(Protocol):

@@ -127,9 +127,112 @@ def _fill_agreeing(ids, r0, r1, c0, c1, value):
             ids[rr[unknown], cc[unknown]] = value[inside][unknown]
 
 
+#: Most pixels traced for shading the grid cannot follow, as a share of all pixels.
+ROUGH_BUDGET = 0.15
+#: A second difference is rough beyond this many standard deviations of its noise...
+ROUGH_NOISE = 4.0
+#: ... and beyond this share of the magnitude of the samples it is taken over.
+ROUGH_RELATIVE = 0.1
+
+
+def rough_cells(grid_ids: np.ndarray, values: np.ndarray, variance: np.ndarray | None,
+                spp: int) -> tuple[np.ndarray, np.ndarray]:
+    """Grid cells whose shading the grid cannot follow, roughest first.
+
+    Along the grid's rows and columns, the second difference
+    ``v[i-1] - 2 v[i] + v[i+1]`` of three samples of one id is zero on a
+    linear ramp and small on smooth shading; it is large on a highlight, a
+    texture edge, a caustic or a penumbra narrower than the grid.  A triple
+    is rough when the difference (summed over the channels) exceeds both
+    ``ROUGH_NOISE`` standard deviations of its noise (from the per-sample
+    ``variance`` and ``spp``) and ``ROUGH_RELATIVE`` of the samples'
+    magnitude; the four cells around its middle sample are then rough.
+
+    Parameters
+    ----------
+    grid_ids : ndarray of int, shape (nr, nc)
+    values : ndarray, shape (nr, nc, C)
+    variance : ndarray, shape (nr, nc, C), or None (noise-free samples)
+    spp : int
+
+    Returns
+    -------
+    rows, cols : ndarray of int
+        Top-left grid line of each rough cell, in decreasing roughness.
+
+    Examples
+    --------
+    >>> ids = np.ones((1, 5), dtype=int)
+    >>> ramp = np.arange(5.0).reshape(1, 5, 1)
+    >>> len(rough_cells(ids, ramp, None, 1)[0])
+    0
+    >>> spike = np.array([0, 0, 5.0, 0, 0]).reshape(1, 5, 1)
+    >>> rough_cells(ids, spike, None, 1)[1].tolist()
+    [0, 1, 2, 3]
+    """
+    nr, nc = grid_ids.shape
+    score = np.zeros((max(nr - 1, 1), max(nc - 1, 1)))
+    noise = np.zeros_like(values) if variance is None else variance / max(spp, 1)
+    for axis in (0, 1):
+        if values.shape[axis] < 3:
+            continue
+        lo, mid, hi = (np.take(values, np.arange(k, values.shape[axis] - 2 + k), axis=axis)
+                       for k in range(3))
+        ilo, imid, ihi = (np.take(grid_ids, np.arange(k, grid_ids.shape[axis] - 2 + k),
+                                  axis=axis) for k in range(3))
+        nlo, nmid, nhi = (np.take(noise, np.arange(k, noise.shape[axis] - 2 + k), axis=axis)
+                          for k in range(3))
+        second = np.abs(lo - 2.0 * mid + hi).sum(axis=-1)
+        sigma = np.sqrt((nlo + 4.0 * nmid + nhi).sum(axis=-1))
+        scale = (np.abs(lo) + 2.0 * np.abs(mid) + np.abs(hi)).sum(axis=-1) / 4.0
+        limit = np.maximum(ROUGH_NOISE * sigma, ROUGH_RELATIVE * scale)
+        rough = (ilo == imid) & (imid == ihi) & (second > limit) & (second > 0.0)
+        ratio = np.where(rough, second / np.where(limit > 0, limit, 1.0), 0.0)
+        r, c = np.nonzero(ratio)
+        found = ratio[r, c]
+        if axis == 0:  # the middle sample: one line further along this axis
+            r = r + 1
+        else:
+            c = c + 1
+        for dy, dx in ((-1, -1), (-1, 0), (0, -1), (0, 0)):  # its four cells
+            rr, cc = r + dy, c + dx
+            ok = (rr >= 0) & (rr < score.shape[0]) & (cc >= 0) & (cc < score.shape[1])
+            np.maximum.at(score, (rr[ok], cc[ok]), found[ok])
+    order = np.argsort(-score, axis=None, kind="stable")
+    order = order[score.ravel()[order] > 0]
+    return np.divmod(order, score.shape[1])
+
+
+def _cell_pixels(pattern: SamplePattern, rows: np.ndarray, cols: np.ndarray,
+                 budget: int) -> np.ndarray:
+    """(column, row) of the pixels of the given grid cells (in order, at most
+    ``budget``), grid pixels left out."""
+    chosen, total = [], 0
+    for r, c in zip(rows.tolist(), cols.tolist()):
+        y0, y1 = pattern.rows[r], pattern.rows[min(r + 1, len(pattern.rows) - 1)]
+        x0, x1 = pattern.cols[c], pattern.cols[min(c + 1, len(pattern.cols) - 1)]
+        cell = (y1 - y0 + 1) * (x1 - x0 + 1)
+        if total + cell > budget:
+            break
+        total += cell
+        chosen.append((y0, y1, x0, x1))
+    if not chosen:
+        return np.zeros((0, 2), dtype=np.int64)
+    mask = np.zeros((pattern.height, pattern.width), dtype=bool)
+    for y0, y1, x0, x1 in chosen:
+        mask[y0:y1 + 1, x0:x1 + 1] = True
+    mask[pattern.mask] = False
+    return np.argwhere(mask)[:, ::-1]
+
+
 def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
                        tracer: Tracer | None = None) -> Reconstruction:
-    """Grid trace + adaptive edge refinement + within-id interpolation (mode ``refine``)."""
+    """Grid trace + adaptive refinement + within-id interpolation (mode ``refine``).
+
+    Cells are traced finer where ids differ (edges, down to pixels) and,
+    within the budget ``ROUGH_BUDGET``, every pixel of the cells whose
+    shading the grid cannot follow (:func:`rough_cells`).
+    """
     rule = params.rule_for("refine")
     stats = Counter()
     start = time.perf_counter()
@@ -149,6 +252,21 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
 
     refined, _ = refine_edges(pattern, grid_ids, trace_ids,
                               None if curved is None else curved.reshape(pattern.grid_shape))
+    grid_shape = pattern.grid_shape + (3,)
+    rows, cols = rough_cells(grid_ids, trace.radiance.reshape(grid_shape),
+                             None if trace.variance is None else trace.variance.reshape(grid_shape),
+                             trace.spp)
+    rough = _cell_pixels(pattern, rows, cols, int(ROUGH_BUDGET * pattern.width * pattern.height))
+    if len(rough):
+        traced_before = np.zeros((pattern.height, pattern.width), dtype=bool)
+        for points, _ in extra:
+            traced_before[points[:, 1], points[:, 0]] = True
+        rough = rough[~traced_before[rough[:, 1], rough[:, 0]]]
+    stats["rough_cells"] = int(len(rows))
+    if len(rough):
+        more = tracer(rough, stream=SeedStream.ROUGH)
+        extra.append((rough, more))
+        refined[rough[:, 1], rough[:, 0]] = more.ids(rule)
     trace_s = sum(more.seconds for _, more in extra)
     id_map = np.where(refined >= 0, refined, pattern.nearest_image(grid_ids))
     edges_s = time.perf_counter() - start - trace_s

@@ -249,8 +249,12 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
 def _full_render(scene, integrator, sensor, spp, seed) -> tuple[np.ndarray, np.ndarray, float]:
     """``mi.render``: (RGB, alpha or None, seconds of the whole call)."""
     start = time.perf_counter()
-    image = mi.render(scene, integrator=integrator, sensor=sensor, seed=seed, spp=spp or 0)
-    dr.eval(image)
+    count = sensor.sampler().sample_count()
+    try:
+        image = mi.render(scene, integrator=integrator, sensor=sensor, seed=seed, spp=spp or 0)
+        dr.eval(image)
+    finally:  # mi.render(spp=...) leaves the sensor's sampler at that count
+        sensor.sampler().set_sample_count(count)
     image = np.array(image, dtype=np.float64)
     check_radiance(image[..., :3], "pixels of the full render")
     alpha = image[..., 3] if sensor.film().base_channels_count() == 4 else None

@@ -70,3 +70,29 @@ def test_refine_mode_on_a_sphere_matches_the_full_trace(variant):
     assert paper_error(refined.image, reference) < 0.5 * paper_error(fast.image, reference)
     assert np.allclose(refined.image[refined.traced_mask], reference[refined.traced_mask],
                        atol=1e-6)
+
+
+def test_refine_traces_cells_whose_shading_the_grid_cannot_follow():
+    # one id, a narrow bright stripe that a grid column crosses: ids see nothing,
+    # the samples beside it disagree, and its cells are traced
+    from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
+    from mitsuba_mrt.types import SeedStream
+
+    height, width = 40, 40
+    truth = np.full((height, width, 3), 0.2)
+    truth[12:20, 20:23] = 5.0  # a short stripe through grid column 21, within the budget
+    pattern = grid_pattern(width, height, 0.1)
+
+    def trace_at(xy):
+        n = len(xy)
+        return SparseTrace(truth[xy[:, 1], xy[:, 0]], np.ones((n, 3)), np.ones(n, np.int64),
+                           np.zeros(n, np.uint32), 0, 1, 0.0, variance=np.zeros((n, 3)))
+
+    def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True):
+        return trace_at(xy)
+
+    out = reconstruct(pattern, trace_at(pattern.pixel_xy), MRTParams(), "refine", tracer)
+    assert out.stats["rough_cells"] > 0
+    assert out.traced_mask[12:20, 20:23].all()
+    assert np.allclose(out.image[12:20, 20:23], 5.0)
+    assert out.stats["refined_pixels"] <= 0.15 * height * width  # ROUGH_BUDGET
