@@ -83,6 +83,8 @@ def _why(result) -> str:
     if decision.reason == "pilot":
         ratio = decision.predicted_mrt_s / decision.predicted_full_s
         return f"auto: the pilot predicted {ratio:.2f} of a full render"
+    if decision.reason == "inaccurate":
+        return "auto: the MRT was fast enough but less accurate on the pilot's band"
     return {"small": "auto: too few samples for the MRT to pay off",
             "scalar": "auto: the scalar variant renders in full"}.get(decision.reason,
                                                                      decision.reason)

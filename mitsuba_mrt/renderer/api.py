@@ -152,7 +152,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     timings = Timings()
     decision = pilot = None
     if mode == "auto":
-        decision, pilot = auto.decide(pattern, tracer)
+        decision, pilot = auto.decide(pattern, tracer, params)
         if decision.mode_used == "full":
             return _rest_in_full(pattern, pilot, tracer, params, spp, decision, start)
         trace = auto.rest_of_grid(pattern, pilot, tracer)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..modes import reconstruct
 from ..recon.sampling import SamplePattern, grid_pattern
+from ..runtime.jit import compile_seconds
 from ..types import MRTParams, SeedStream, SparseTrace, Tracer
 
 #: ``auto`` runs the MRT only when its predicted time is below this share of
@@ -21,7 +22,7 @@ AUTO_BAND = 16
 #: pilot: the pilot's own launches would cost more than the MRT could save.
 AUTO_MIN_SAMPLES = 1 << 21
 #: Share of the pixels that ``refine`` is expected to trace beyond the grid.
-AUTO_REFINE_SHARE = 0.06
+AUTO_REFINE_SHARE = 0.1
 
 
 @dataclass
@@ -33,13 +34,23 @@ class AutoDecision:
     mode_used : str
         ``refine``, ``idpass`` or ``full``.
     reason : str
-        ``pilot`` (measured), ``small`` (too few samples for a pilot to pay)
-        or ``scalar`` (the scalar variant, where the MRT cannot win).
+        ``pilot`` (measured), ``inaccurate`` (measured fast enough, but less
+        accurate on the pilot's band than a full render or bicubic),
+        ``small`` (too few samples for a pilot to pay) or ``scalar`` (the
+        scalar variant, where the MRT cannot win).
     pilot_pixels : int
         Pixels the pilot traced (its band and its grid rows).
     predicted_full_s, predicted_refine_s, predicted_idpass_s, predicted_mrt_s : float or None
         The pilot's predictions for the whole image (``predicted_mrt_s`` the
-        cheaper MRT mode's).
+        cheaper MRT mode's), without the pilot's kernel compilation.
+    compile_s : float
+        Seconds of the pilot spent compiling kernels (a first run's cost,
+        left out of the predictions).
+    band_mse_mrt, band_mse_bicubic, band_noise : float or None
+        On the pilot's band, reconstructed from its grid rows: the mean
+        squared difference to the band's own render at untraced pixels of
+        the chosen mode and of bicubic, and the band's noise (variance of a
+        pixel's mean).
     """
 
     mode_used: str
@@ -49,6 +60,10 @@ class AutoDecision:
     predicted_refine_s: float | None = None
     predicted_idpass_s: float | None = None
     predicted_mrt_s: float | None = None
+    compile_s: float = 0.0
+    band_mse_mrt: float | None = None
+    band_mse_bicubic: float | None = None
+    band_noise: float | None = None
 
 
 @dataclass
@@ -76,33 +91,41 @@ def decide_without_pilot(width: int, height: int, spp: int, jit: bool) -> AutoDe
     return None
 
 
-def decide(pattern: SamplePattern, tracer: Tracer) -> tuple[AutoDecision, Pilot]:
+def decide(pattern: SamplePattern, tracer: Tracer,
+           params: MRTParams) -> tuple[AutoDecision, Pilot]:
     """Decide between refine, idpass and a full render from a measured pilot.
 
     The pilot traces the top ``1 / AUTO_BAND`` of the image: every pixel with
     the nested integrator alone (what a full render pays; kept as part of the
     image whatever wins) and the grid rows in it with the id AOVs (what the
-    MRT pays per traced pixel; the difference is the id AOVs' cost).  Scaled
-    to the whole image, with the reconstruction's cost per pixel calibrated
-    once per process: ``refine`` adds ``AUTO_REFINE_SHARE`` of the pixels
-    traced in full, ``idpass`` the id AOVs of every pixel.  The cheaper runs
-    only if it is predicted below ``AUTO_MARGIN`` of the full render.
+    MRT pays per traced pixel; the difference is the id AOVs' cost).  Kernel
+    compilation (a one-time cost) is left out.  Scaled to the whole image,
+    with the reconstruction's cost per pixel calibrated once per process:
+    ``refine`` adds ``AUTO_REFINE_SHARE`` of the pixels traced in full,
+    ``idpass`` the id AOVs of every pixel.  The cheaper runs only if it is
+    predicted below ``AUTO_MARGIN`` of the full render and if, on the band
+    reconstructed from its grid rows, it is as accurate as a full render and
+    more accurate than bicubic (:func:`band_accuracy`).
     """
     nr, _ = pattern.grid_shape
     width, height = pattern.width, pattern.height
     pixels = width * height
     band_height = height // AUTO_BAND
     band_xy = np.stack(np.meshgrid(np.arange(width), np.arange(band_height)), -1).reshape(-1, 2)
-    band = tracer(band_xy, stream=SeedStream.BAND, aovs=False)
     xy = pattern.pixel_xy.reshape(nr, -1, 2)
     rows = np.flatnonzero(pattern.rows < band_height)
-    grid = tracer(xy[rows].reshape(-1, 2), stream=SeedStream.PILOT)
+    with compile_seconds() as band_compile:
+        band = tracer(band_xy, stream=SeedStream.BAND, aovs=False)
+    with compile_seconds() as grid_compile:
+        grid = tracer(xy[rows].reshape(-1, 2), stream=SeedStream.PILOT)
+    band_s = max(band.seconds - band_compile[0], 0.1 * band.seconds)
+    grid_s = max(grid.seconds - grid_compile[0], 0.1 * grid.seconds)
     scale = height / band_height
-    predicted_full = band.seconds * scale
-    radiance_per_pixel = band.seconds / len(band_xy)
-    aov_per_pixel = max(grid.seconds / max(len(grid.radiance), 1) - radiance_per_pixel,
+    predicted_full = band_s * scale
+    radiance_per_pixel = band_s / len(band_xy)
+    aov_per_pixel = max(grid_s / max(len(grid.radiance), 1) - radiance_per_pixel,
                         0.1 * radiance_per_pixel)
-    grid_and_reconstruction = (grid.seconds * nr / max(len(rows), 1)
+    grid_and_reconstruction = (grid_s * nr / max(len(rows), 1)
                                + reconstruction_seconds_per_pixel() * pixels)
     predicted = {"refine": grid_and_reconstruction
                  + AUTO_REFINE_SHARE * pixels * (radiance_per_pixel + aov_per_pixel),
@@ -114,8 +137,63 @@ def decide(pattern: SamplePattern, tracer: Tracer) -> tuple[AutoDecision, Pilot]
                             predicted_full_s=predicted_full,
                             predicted_refine_s=predicted["refine"],
                             predicted_idpass_s=predicted["idpass"],
-                            predicted_mrt_s=predicted[best])
-    return decision, Pilot(band, band_height, rows, grid)
+                            predicted_mrt_s=predicted[best],
+                            compile_s=band_compile[0] + grid_compile[0])
+    pilot = Pilot(band, band_height, rows, grid)
+    if wins and len(rows) >= 2:
+        accurate = band_accuracy(pattern, pilot, tracer, params, best, decision)
+        if not accurate:
+            decision.mode_used, decision.reason = "full", "inaccurate"
+    return decision, pilot
+
+
+def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: MRTParams,
+                  mode: str, decision: AutoDecision) -> bool:
+    """Whether ``mode`` reconstructs the pilot's band as well as it must.
+
+    The band's grid rows (traced with their own seed) are reconstructed
+    with ``mode`` and with ``bicubic``; pixels that ``mode`` traces come from
+    the band's render, and its ids from an id pass over the band.  At the
+    pixels neither traced, the mean squared difference to the band's render
+    is the reconstruction's error plus the band's own noise ``s2``; the MRT's
+    image is as accurate as a full render where that difference is at most
+    ``2 s2``, and it must also be at most bicubic's.  The figures go into
+    ``decision``.
+    """
+    width, band_height = pattern.width, pilot.band_height
+    ids = tracer(np.stack(np.meshgrid(np.arange(width), np.arange(band_height)),
+                          -1).reshape(-1, 2), stream=SeedStream.ID_PASS, radiance=False)
+    band = pilot.band
+    image = band.radiance.reshape(band_height, width, 3)
+
+    def band_tracer(pixel_xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True):
+        index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
+        n = len(index)
+        return replace(ids, radiance=band.radiance[index], albedo=ids.albedo[index],
+                       shape_index=ids.shape_index[index],
+                       visible_lights=ids.visible_lights[index],
+                       path_id=None if ids.path_id is None else ids.path_id[index],
+                       curved_mirror=None if ids.curved_mirror is None
+                       else ids.curved_mirror[index],
+                       normal=None if ids.normal is None else ids.normal[index],
+                       alpha=None if band.alpha is None else band.alpha[index],
+                       variance=None if band.variance is None else band.variance[index],
+                       seconds=0.0) if n else replace(ids, seconds=0.0)
+
+    sub = SamplePattern(width, band_height, pattern.rows[pilot.rows], pattern.cols)
+    recon = reconstruct(sub, pilot.grid, params, mode, band_tracer)
+    bicubic = reconstruct(sub, pilot.grid, params, "bicubic")
+    untraced = ~recon.traced_mask
+    if not untraced.any():
+        return True
+    noise = float(np.mean(band.variance) / max(band.spp, 1)) if band.variance is not None \
+        else 0.0
+    decision.band_mse_mrt = float(np.mean((recon.image - image)[untraced] ** 2))
+    decision.band_mse_bicubic = float(np.mean((bicubic.image - image)[untraced] ** 2))
+    decision.band_noise = noise
+    tiny = 1e-9 * float(np.mean(image ** 2))  # differences of rounding, not of accuracy
+    return (decision.band_mse_mrt <= 2.0 * noise + tiny
+            and decision.band_mse_mrt <= decision.band_mse_bicubic + tiny)
 
 
 def rest_of_grid(pattern: SamplePattern, pilot: Pilot, tracer: Tracer) -> SparseTrace:

@@ -99,3 +99,29 @@ def jit_workers():
         yield
     finally:
         dr.set_thread_count(1)
+
+
+@contextlib.contextmanager
+def compile_seconds():
+    """Yield a one-element list that holds, after the block, the seconds Dr.Jit
+    spent compiling kernels inside it (kernels found in its caches cost none).
+
+    Examples
+    --------
+    >>> with compile_seconds() as spent:
+    ...     pass
+    >>> spent
+    [0.0]
+    """
+    import drjit as dr
+
+    spent = [0.0]
+    before = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # (reading the history clears it)
+    try:
+        yield spent
+    finally:
+        spent[0] = sum(entry.get("codegen_time", 0.0) + entry.get("backend_time", 0.0)
+                       for entry in dr.kernel_history() if not entry.get("cache_hit")) / 1e3
+        dr.set_flag(dr.JitFlag.KernelHistory, before)

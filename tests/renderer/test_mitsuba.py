@@ -226,6 +226,9 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
     from mitsuba_mrt.renderer import auto
 
     monkeypatch.setattr(auto, "AUTO_MARGIN", margin)
+    # matte is noise-free: no reconstruction is as accurate as the full render,
+    # so for the MRT's outcome the band's accuracy check is passed by hand
+    monkeypatch.setattr(auto, "band_accuracy", lambda *args: True)
     scene = mi.load_string(small_scene_xml(512))  # 2^18 samples, 8 spp: 2^21, a pilot
     result = mitsuba_mrt.render(scene, spp=8)
     reference, _ = mitsuba_mrt.render_reference(scene, spp=8)
@@ -246,6 +249,30 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
         # the pilot's band (top 1/16, traced in full) is kept exactly
         assert result.traced_mask[:32].all()
         assert np.allclose(result.image[:32], reference[:32], atol=1e-6)
+
+
+def test_auto_checks_accuracy_on_the_pilot_band(variant, monkeypatch):
+    from mitsuba_mrt.renderer import auto
+
+    monkeypatch.setattr(auto, "AUTO_MARGIN", 1e9)  # fast enough, whatever it measures
+    scene = mi.load_string(small_scene_xml(512))
+    # the band (the top rows: plane and sky) is smooth: reconstructed exactly
+    result = mitsuba_mrt.render(scene, spp=8)
+    assert result.auto.reason == "pilot" and result.mode_used in ("refine", "idpass")
+    assert result.auto.band_mse_mrt is not None and result.auto.band_mse_bicubic is not None
+    # a reconstruction that is off on the band is not chosen
+    real = auto.reconstruct
+
+    def off(pattern, trace, params, mode, tracer=None):
+        out = real(pattern, trace, params, mode, tracer)
+        if mode != "bicubic":
+            out.image = out.image + 0.1
+        return out
+
+    monkeypatch.setattr(auto, "reconstruct", off)
+    result = mitsuba_mrt.render(scene, spp=8)
+    assert result.mode_used == "full" and result.auto.reason == "inaccurate"
+    assert result.auto.band_mse_mrt > result.auto.band_mse_bicubic
 
 
 def test_auto_renders_in_full_in_the_scalar_variant(variant):
