@@ -291,7 +291,7 @@ def _shape_lookup(scene: mi.Scene):
 
 #: Samples per pixel whose first hit gives the albedo (the first ones of each
 #: pixel; all of them when a pixel has fewer), and per pixel of an albedo-only pass.
-ALBEDO_SAMPLES = 4
+ALBEDO_SAMPLES = 16
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.
