@@ -166,3 +166,22 @@ def test_unknown_property_error_is_one_line_from_the_cli(tmp_path):
                           timeout=300)
     assert proc.returncode == 2 and "bogus" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def test_crop_window_and_second_sensor_at_full_fraction_are_mi_render(variant):
+    crop = ('<integer name="crop_offset_x" value="5"/><integer name="crop_offset_y" value="7"/>'
+            '<integer name="crop_width" value="11"/><integer name="crop_height" value="9"/>'
+            '<rfilter type="box"/>')
+    second = '''<sensor type="perspective"><float name="fov" value="30"/>
+      <transform name="to_world"><lookat origin="3, 2, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+      <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
+      <film type="hdrfilm"><integer name="width" value="12"/><integer name="height" value="10"/>
+        <rfilter type="box"/></film></sensor>'''
+    scene = mi.load_string(path_scene(rfilter=crop, extra=second))
+    for sensor in (0, 1):
+        reference, _ = mitsuba_mrt.render_reference(scene, sensor=sensor, seed=2)
+        result = mitsuba_mrt.render(scene, sensor=sensor, mode="fast", sample_fraction=1.0,
+                                    seed=2)
+        assert result.image.shape == reference.shape == ((9, 11, 3) if sensor == 0 else
+                                                         (10, 12, 3))
+        assert np.allclose(result.image, reference, rtol=1e-5, atol=1e-6)
