@@ -4,20 +4,17 @@
 into the pixels around it with the film's filter ``f`` (Mitsuba's default
 ``gaussian`` reaches two pixels): a pixel's expected value is the
 filter-weighted mean of the radiance around its centre,
-``∫ f(x - c) L(x) dx / ∫ f(x - c) dx``.  The MRT traces only some pixels,
-so it places each traced pixel's samples around its centre with density
-proportional to ``|f|`` (a tabulated, separable distribution) -- uniformly
-over the pixel, as ``mi.render`` does, where the neighbours its filter
-reaches are traced too -- splats them with the same filter, and weights
-each sample by ``1 / rho(x)``, where ``rho`` is the density of all the
-samples of that trace at ``x``.  The expectation is then ``mi.render``'s
-for any set of traced pixels, and when every pixel is traced the estimate
-is ``mi.render``'s own.
+``∫ f(x - c) L(x) dx / ∫ f(x - c) dx``.  When the MRT traces every pixel it
+does exactly that.  When it traces some pixels, each is estimated from its
+own samples, placed around its centre with density proportional to ``|f|``
+(a tabulated, separable distribution): weighted by ``f / density``, which
+is the filter's sign, their mean has the same expectation, without the
+neighbours' samples that a sparse grid does not have.  Samples outside the
+image are dropped, as ``mi.render`` never takes them.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,12 +60,6 @@ class FilterTable:
         inside = np.where(mass > 0, (u - self.cdf[k]) / np.where(mass > 0, mass, 1.0), 0.5)
         return -self.radius + (k + inside) * self.cell
 
-    def density(self, offset: np.ndarray) -> np.ndarray:
-        """The distribution's density at ``offset`` (0 outside the radius; numpy)."""
-        k = np.floor((np.asarray(offset) + self.radius) / self.cell).astype(np.int64)
-        inside = (k >= 0) & (k < len(self.pdf))
-        return np.where(inside, self.pdf[np.clip(k, 0, len(self.pdf) - 1)], 0.0)
-
     @classmethod
     def from_values(cls, radius: float, values: np.ndarray) -> "FilterTable":
         """The table of filter values at the cell centres."""
@@ -94,8 +85,3 @@ def filter_table(rfilter) -> FilterTable:
         values = [np.asarray(rfilter.eval(float(x))).ravel()[0] for x in centres]
         _TABLES[key] = FilterTable.from_values(radius, np.array(values))
     return _TABLES[key]
-
-
-def window(radius: float) -> int:
-    """Pixels either side of a sample's pixel whose centre its filter can reach."""
-    return int(math.ceil(radius + 0.5))

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 import numpy as np
-from scipy.ndimage import minimum_filter
 
 from ..errors import MRTError
 from ..types import SparseTrace
@@ -376,28 +375,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        variance=samples.variance if radiance else None, normal=normal)
 
 
-#: How a traced pixel's samples are placed (see :func:`_occupancy`).
-FILTERED, SQUARE = 1, 2
-
-
-def _occupancy(pixel_xy: np.ndarray, width: int, height: int, reach: int) -> np.ndarray:
-    """(height * width,) float32: how each pixel's samples are placed.
-
-    0 where the pixel is not traced; ``SQUARE`` (uniformly over the pixel,
-    as ``mi.render`` places them) where every pixel that the filter of its
-    centre reaches is traced too, so that their squares cover its filter;
-    ``FILTERED`` (distributed like the filter) elsewhere.  Pixels outside
-    the image count as traced: no sample is taken there.
-    """
-    traced = np.zeros((height, width), dtype=bool)
-    traced[pixel_xy[:, 1], pixel_xy[:, 0]] = True
-    covered = minimum_filter(traced, size=2 * reach + 1, mode="constant", cval=True)
-    return np.where(traced, np.where(covered, SQUARE, FILTERED), 0).astype(np.float32).ravel()
-
-
-def _read_block(tensor: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
-    """The developed values of the traced pixels from the block's sums."""
-    sums = np.asarray(tensor, dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+def _read_sums(sums: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
+    """The developed values of the traced pixels from their filter-weighted sums."""
     weight = sums[:, 4:5]
     safe = np.where(weight != 0.0, weight, 1.0)
     radiance = np.where(weight != 0.0, sums[:, 0:3] / safe, 0.0)
@@ -410,22 +389,30 @@ def _read_block(tensor: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
                       np.maximum(second - radiance ** 2, 0.0), np.clip(albedo, 0.0, 1.0))
 
 
-def _new_block(film) -> mi.ImageBlock:
-    return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
-                         channel_count=_CHANNELS, rfilter=film.rfilter(), border=False)
+def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
+    """Whether ``pixel_xy`` is every pixel of the image, each once."""
+    return len(pixel_xy) == width * height and len(
+        np.unique(pixel_xy[:, 1] * width + pixel_xy[:, 0])) == width * height
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):
-    """Trace ``spp`` samples of every pixel in one wavefront and develop them."""
+    """Trace ``spp`` samples of every pixel in one wavefront and develop them.
+
+    Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
+    splatted with the filter).  Some pixels: each from its own samples, placed
+    with the filter's distribution (:mod:`.pixel_filter`).
+    """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
-    table = filter_table(film.rfilter())
+    rfilter = film.rfilter()
+    table = filter_table(rfilter)
     n = len(pixel_xy)
+    every = _every_pixel(pixel_xy, width, height)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
     lane = dr.arange(mi.UInt32, n * spp)
     owner = lane // spp  # lanes pixel-major, as Mitsuba's own render loop lays them out
-    cdf, pdf = mi.Float(table.cdf.astype(np.float32)), mi.Float(table.pdf.astype(np.float32))
+    cdf = mi.Float(table.cdf.astype(np.float32))
 
     def offset(u):  # inverse CDF of the tabulated |filter|
         k = dr.binary_search(0, len(table.pdf) - 1,
@@ -434,37 +421,19 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         t = dr.select(hi > lo, (u - lo) / (hi - lo), 0.5)
         return -table.radius + (mi.Float(k) + t) * table.cell
 
-    def density(t):
-        k = mi.Int32(dr.floor((t + table.radius) / table.cell))
-        inside = (k >= 0) & (k < len(table.pdf))
-        return dr.gather(mi.Float, pdf, mi.UInt32(dr.maximum(k, 0)), inside)
-
-    reach = int(np.ceil(table.radius - 0.5))
-    kinds = _occupancy(pixel_xy, width, height, reach)
-    occupied = mi.Float(kinds)
     u = sampler.next_2d()
     pixel = mi.Point2f(dr.gather(mi.Float, mi.Float(pixel_xy[:, 0]), owner),
                        dr.gather(mi.Float, mi.Float(pixel_xy[:, 1]), owner))
-    square = dr.gather(mi.Float, mi.Float(kinds[pixel_xy[:, 1] * width + pixel_xy[:, 0]]),
-                       owner) == SQUARE
-    position = dr.select(square, pixel + u,
-                         pixel + 0.5 + mi.Point2f(offset(u.x), offset(u.y)))
+    if every:
+        position, weight = pixel + u, mi.Float(1.0)
+    else:
+        d = mi.Point2f(offset(u.x), offset(u.y))
+        position = pixel + 0.5 + d
+        # f / density is a constant of the filter's sign: the weight is that sign
+        weight = dr.sign(rfilter.eval(d.x) * rfilter.eval(d.y))
     active = mi.Bool(True) if film.sample_border() else (
         (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
-    # the density of all of this trace's samples at each sample's position
-    base_x, base_y = mi.Int32(dr.floor(position.x)), mi.Int32(dr.floor(position.y))
-    rho = mi.Float(0.0)
-    for oy in range(-reach, reach + 1):
-        for ox in range(-reach, reach + 1):
-            qx, qy = base_x + ox, base_y + oy
-            ok = (qx >= 0) & (qx < width) & (qy >= 0) & (qy < height)
-            kind = dr.gather(mi.Float, occupied, mi.UInt32(dr.maximum(qy * width + qx, 0)), ok)
-            spread = density(position.x - (mi.Float(qx) + 0.5)) \
-                * density(position.y - (mi.Float(qy) + 0.5))
-            rho += dr.select(kind == SQUARE, 1.0 if (ox, oy) == (0, 0) else 0.0,
-                             dr.select(kind == FILTERED, spread, 0.0))
-    active &= rho > 0.0
-    weight = dr.select(active, dr.rcp(rho * spp), 0.0)
+    weight = dr.select(active, weight, 0.0)
 
     ray, ray_weight = _camera_ray(sensor, sampler, position, spp)
     zero = mi.Float(0.0)
@@ -481,47 +450,51 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         first = active & ((lane % spp) < min(spp, ALBEDO_SAMPLES))
         a_rgb, hit = _directional_albedo(scene, sampler, ray, first)
         a_weight = dr.select(first & hit, weight, 0.0)
-    block = _new_block(film)
-    block.put(position + mi.ScalarVector2f(film.crop_offset()),
-              [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
-               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
-               a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid],
-              active)
-    return _read_block(block.tensor().numpy(), pixel_xy)
+    values = [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
+              weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
+              a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid]
+    # Evaluate once: each reduction below would otherwise re-run the integrator.
+    dr.eval(values)
+    if every:
+        block = _new_block(film)
+        block.put(position + mi.ScalarVector2f(film.crop_offset()), values, active)
+        sums = block.tensor().numpy().astype(np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+    else:
+        sums = [dr.block_sum(value, spp) for value in values]
+        dr.eval(sums)
+        sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
+                         for total in sums], axis=1)  # (literal zeros broadcast)
+    return _read_sums(sums, pixel_xy)
+
+
+def _new_block(film) -> mi.ImageBlock:
+    return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
+                         channel_count=_CHANNELS, rfilter=film.rfilter(), border=False)
 
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
-    table = filter_table(film.rfilter())
-    reach = int(np.ceil(table.radius - 0.5))
-    kinds = _occupancy(pixel_xy, width, height, reach).reshape(height, width)
+    rfilter = film.rfilter()
+    table = filter_table(rfilter)
+    every = _every_pixel(pixel_xy, width, height)
     offset = mi.ScalarVector2f(film.crop_offset())
-    block = _new_block(film)
+    block = _new_block(film) if every else None
+    sums = np.zeros((len(pixel_xy), _CHANNELS))
     for k, (x, y) in enumerate(pixel_xy.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
         for s in range(spp):
             u = sampler.next_2d()
-            if kinds[y, x] == SQUARE:
-                px, py = x + u[0], y + u[1]
+            if every:
+                px, py, weight = x + u[0], y + u[1], 1.0
             else:
-                px = x + 0.5 + float(table.sample(np.array([u[0]]))[0])
-                py = y + 0.5 + float(table.sample(np.array([u[1]]))[0])
-            inside = film.sample_border() or (0 <= px < width and 0 <= py < height)
-            rho = 0.0
-            for qy in range(int(np.floor(py)) - reach, int(np.floor(py)) + reach + 1):
-                for qx in range(int(np.floor(px)) - reach, int(np.floor(px)) + reach + 1):
-                    if not (0 <= qx < width and 0 <= qy < height) or not kinds[qy, qx]:
-                        continue
-                    if kinds[qy, qx] == SQUARE:
-                        rho += float(qx == int(np.floor(px)) and qy == int(np.floor(py)))
-                    else:
-                        rho += float(table.density(px - qx - 0.5) * table.density(py - qy - 0.5))
-            if not (inside and rho > 0.0):
+                dx, dy = (float(v) for v in table.sample(np.array([u[0], u[1]])))
+                px, py = x + 0.5 + dx, y + 0.5 + dy
+                weight = float(np.sign(float(rfilter.eval(dx)) * float(rfilter.eval(dy))))
+            if not (film.sample_border() or (0 <= px < width and 0 <= py < height)):
                 sampler.advance()
                 continue
-            weight = 1.0 / (rho * spp)
             ray, ray_weight = _camera_ray(sensor, sampler, mi.Point2f(px, py), spp)
             rgb, alpha, invalid = np.zeros(3), 0.0, 0.0
             if integrator is not None:
@@ -536,9 +509,14 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
                 a_rgb, a_weight = np.asarray(a_rgb, np.float64), weight if hit else 0.0
             values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
                                      a_weight * a_rgb, [a_weight, invalid]])
-            block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
+            if every:
+                block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
+            else:
+                sums[k] += values
             sampler.advance()
-    return _read_block(np.array(block.tensor()), pixel_xy)
+    if every:
+        sums = np.array(block.tensor(), dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+    return _read_sums(sums, pixel_xy)
 
 
 def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
