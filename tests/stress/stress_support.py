@@ -245,10 +245,9 @@ class Case:
         lines = ["import numpy as np",
                  "from mitsuba_mrt import reconstruct, SparseTrace, MRTParams, grid_pattern"]
         if fld.shape_index.size <= 64:
-            with np.printoptions(threshold=sys.maxsize, floatmode="unique", linewidth=120):
-                lines += [f"shape_index = np.array({fld.shape_index.tolist()!r})",
-                          f"radiance = np.array({fld.radiance.tolist()!r})",
-                          f"albedo = np.array({fld.albedo.tolist()!r})"]
+            lines += [f"shape_index = np.array({fld.shape_index.tolist()!r})",
+                      "radiance = " + _array_code(fld.radiance, fld.shape_index),
+                      "albedo = " + _array_code(fld.albedo, fld.shape_index)]
         else:
             lines += ["import sys; sys.path.insert(0, 'tests')",
                       "from stress.stress_support import Case",
@@ -266,6 +265,20 @@ class Case:
             f"rbf_degree={self.rbf_degree}), {mode!r}, tracer)",
         ]
         return "\n".join(lines)
+
+
+def _array_code(values: np.ndarray, shapes: np.ndarray) -> str:
+    """Short Python for a (h, w, 3) array: one value, one value per shape, or literal."""
+    flat = values.reshape(-1, 3)
+    if (flat == flat[0]).all():
+        return f"np.full({values.shape}, {flat[0].tolist()!r})"
+    labels = np.unique(shapes)
+    table = {int(v): values[shapes == v] for v in labels}
+    if all((t == t[0]).all() for t in table.values()) and labels.max() < 64:
+        rows = [table[v][0].tolist() if v in table else [0.0, 0.0, 0.0]
+                for v in range(int(labels.max()) + 1)]
+        return f"np.array({rows!r})[shape_index]"
+    return f"np.array({values.tolist()!r})"
 
 
 # --------------------------------------------------------------------------- strategies

@@ -73,10 +73,26 @@ def test_traced_pixels_are_exact(case, mode, data):
     return [], 0.0
 
 
+@property_test("traced_ids", cases())
+def test_traced_ids_are_kept(case, mode, data):
+    """The output id map gives every traced pixel the id it was traced with
+    (the regions the other properties use are the output's)."""
+    out = case.run(mode)
+    truth = case.field.ids(case.params.rule_for(mode))
+    mask = out.traced_mask
+    wrong = out.ids[mask] != truth[mask]
+    if wrong.any():
+        return [f"traced ids overwritten: {int(wrong.sum())} of {int(mask.sum())} traced pixels"], \
+            float(wrong.mean())
+    return [], 0.0
+
+
 @property_test("no_new_extremes", cases(albedos=CONSTANT_ALBEDOS))
 def test_no_new_extremes(case, mode, data):
-    """Every pixel lies within [min, max] of the samples of its own id, per channel
-    (albedo constant within each id, so radiance is what is interpolated)."""
+    """Every pixel lies within [min, max] of the samples of its own id (the
+    output id map's), per channel; albedo is constant within each id, so
+    radiance is what is interpolated.  Traced pixels are left to
+    test_traced_pixels_are_exact."""
     out = case.run(mode)
     samples = region_samples(case, mode, out)
     problems, worst = [], 0.0
@@ -86,7 +102,7 @@ def test_no_new_extremes(case, mode, data):
         s = samples[region]
         lo, hi = s.min(0), s.max(0)
         tol = bound_tolerance(lo, hi)
-        pix = out.image[out.ids == region]
+        pix = out.image[(out.ids == region) & ~out.traced_mask]
         over = np.maximum(pix - hi - tol, lo - tol - pix)
         if (over > 0).any() or not np.isfinite(pix).all():
             p, ch = np.unravel_index(np.nanargmax(np.where(np.isfinite(over), over, np.inf)),
@@ -163,7 +179,7 @@ def test_constant_regions_stay_constant(case, mode, data):
         if s is None or not (s == s[0]).all():
             continue
         c = s[0]
-        pix = out.image[out.ids == region]
+        pix = out.image[(out.ids == region) & ~out.traced_mask]
         dev = np.abs(pix - c)
         tol = 1e-5 * np.abs(c) + 1e-300
         if (dev > tol).any() or not np.isfinite(pix).all():
@@ -193,7 +209,7 @@ def test_no_value_crosses_regions(case, mode, data):
     changed = case.run(mode, fld.with_radiance(radiance))
     if not np.array_equal(base.ids, changed.ids):
         return ["ids changed with the values of other ids"], 1.0
-    mine = base.ids == region
+    mine = (base.ids == region) & ~base.traced_mask  # traced pixels keep their own values
     s = fld.radiance[base.traced_mask & (truth == region)]
     lo, hi = s.min(0), s.max(0)
     tol = bound_tolerance(lo, hi)
