@@ -109,7 +109,8 @@ def test_no_new_extremes(case, mode, data):
                                      over.shape)
             span = hi[ch] - lo[ch]
             excess = ratio(over[p, ch] + tol[ch], span) if span > 0 else np.inf
-            worst = max(worst, excess)
+            # the measure: how far out, relative to the larger of range and magnitude
+            worst = max(worst, ratio(over[p, ch] + tol[ch], max(span, abs(lo[ch]), abs(hi[ch]))))
             problems.append(
                 f"out of range: id {region} ({len(s)} samples): value {pix[p, ch]:.6g} outside "
                 f"[{lo[ch]:.6g}, {hi[ch]:.6g}] (channel {ch}) by {excess:.3g} x the range, "
