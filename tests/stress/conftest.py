@@ -4,7 +4,9 @@
 the whole folder runs in about a minute on two cores.  ``thorough``
 (``MITSUBA_MRT_STRESS=thorough``): 1000 examples per property and mode;
 failures are counted rather than stopping each test at the first, and a
-table of cases and failures per property and mode ends the run.
+table of cases and failures per property and mode ends the run.  ``repro``:
+as many examples, but each test stops at its first failure and shrinks it
+to a minimal example (a standalone snippet is printed with it).
 """
 
 from __future__ import annotations
@@ -20,7 +22,11 @@ _COMMON = dict(deadline=None, database=None, print_blob=False,
                                       HealthCheck.filter_too_much])
 
 settings.register_profile("fast", max_examples=8, derandomize=True, **_COMMON)
-settings.register_profile("thorough", max_examples=int(os.environ.get("MITSUBA_MRT_STRESS_EXAMPLES", 1000)),
+settings.register_profile("thorough",
+                          max_examples=int(os.environ.get("MITSUBA_MRT_STRESS_EXAMPLES", 1000)),
+                          **_COMMON)
+# as many examples as thorough, but stop at the first failure and shrink it
+settings.register_profile("repro", max_examples=int(os.environ.get("MITSUBA_MRT_STRESS_EXAMPLES", 1000)),
                           **_COMMON)
 settings.load_profile(os.environ.get("MITSUBA_MRT_STRESS", "fast"))
 
@@ -31,7 +37,7 @@ def pytest_terminal_summary(terminalreporter):
     write = terminalreporter.write_line
     write("")
     write("stress summary: cases run / failing cases (worst measure; failure kinds)")
-    props = sorted({p for p, _ in TALLIES}, key=lambda p: list(TALLIES).index(next(k for k in TALLIES if k[0] == p)))
+    props = list(dict.fromkeys(p for p, _ in TALLIES))  # in the order they ran
     modes = sorted({m for _, m in TALLIES}, key=["paper", "fast", "refine", "idpass"].index)
     write(f"{'property':<20}" + "".join(f"{m:>16}" for m in modes))
     for prop in props:

@@ -7,10 +7,11 @@ shrinks the parameters and a failing case prints as a short, readable
 call.  The traced grid and the tracer of ``refine`` / ``idpass`` read the
 same field, as a renderer would.
 
-The property checks return a list of problems (strings) and a few numbers;
-:func:`verify` records them for the summary table and fails the example
-(``fast`` profile), or only records it (``thorough``, which keeps going to
-count failure rates and fails the test at the end).
+The property checks return a list of problems (strings) and a measure;
+:func:`check` records them for the summary table and fails the example
+(profiles ``fast`` and ``repro``: hypothesis then shrinks it), or only
+records it (``thorough``, which keeps going to count failure rates and
+fails the test at the end).
 """
 
 from __future__ import annotations
@@ -376,7 +377,7 @@ def check(prop: str, mode: str, case: Case, body):
         problems, measure = [f"raised {_exception_kind(exc)}: {exc}"], 0.0
         kind = _exception_kind(exc)
     else:
-        kind = problems[0].split(":")[0] if problems else None
+        kind = problems[0].split(":")[0][:40] if problems else None
     if not problems:
         return
     tally.failures += 1

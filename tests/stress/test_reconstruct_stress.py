@@ -187,7 +187,7 @@ def test_constant_regions_stay_constant(case, mode, data):
             rel = float(np.nanmax(np.where(np.isfinite(dev), dev, np.inf) / np.maximum(np.abs(c), 1e-300)))
             worst = max(worst, rel)
             p = int(np.nanargmax(np.where(np.isfinite(dev), dev, np.inf).max(-1)))
-            problems.append(f"constant id {region} ({len(s)} samples of {c.tolist()}) has "
+            problems.append(f"constant region changed: id {region} ({len(s)} samples of {c.tolist()}) has "
                             f"{pix[p].tolist()}: relative deviation {rel:.3g}, "
                             f"{int((dev > tol).any(-1).sum())} of {len(pix)} pixels")
     return problems, worst
@@ -218,7 +218,7 @@ def test_no_value_crosses_regions(case, mode, data):
     if (diff > tol).any() or not np.isfinite(diff).all():
         span = np.where(hi > lo, hi - lo, np.maximum(np.abs(hi), 1e-300))
         rel = float(np.nanmax(np.where(np.isfinite(diff), diff, np.inf) / span))
-        return [f"leak into id {region}: {int((diff > tol).any(-1).sum())} of {int(mine.sum())} "
+        return [f"leak: into id {region}, {int((diff > tol).any(-1).sum())} of {int(mine.sum())} "
                 f"pixels change, by up to {rel:.3g} x the id's range"], rel
     return [], 0.0
 
