@@ -286,14 +286,52 @@ def test_known_overflow_when_divided_by_albedo(mode):
     assert np.isfinite(out.image).all(), f"{int((~np.isfinite(out.image)).any(-1).sum())} non-finite pixels"
 
 
-def test_known_paper_rbf_degree1_near_float32_max():
-    """Reported: the degree-1 RBF raised a raw ValueError for values near float32's max."""
-    p = grid_pattern(6, 6, 1.0)
-    rng = np.random.default_rng(0)
-    radiance = rng.uniform(0.5, 1.0, (p.count, 3)) * 3.4e38
+@pytest.mark.parametrize("degree", [-1, 0, 1])
+def test_known_paper_rbf_near_float32_max(degree):
+    """Reported: the RBF raised a raw ValueError for values near float32's max.
+    Only from 128 samples per id (rbf_solve.MIN_SIZE) is the float32 Cholesky
+    used, so the image has 144 samples of one id."""
+    p = grid_pattern(12, 12, 1.0)
+    radiance = np.random.default_rng(0).uniform(0.5, 1.0, (p.count, 3)) * 3.0e38
     try:
         out = reconstruct(p, _trace(p.count, radiance, np.ones((p.count, 3)), np.ones(p.count)),
-                          MRTParams(sample_fraction=1.0, rbf_degree=1), "paper")
+                          MRTParams(sample_fraction=1.0, rbf_degree=degree), "paper")
     except MRTError:
         return
     assert np.isfinite(out.image).all()
+
+
+def _stripes_field():
+    """7 x 25 vertical stripes: shape 1 on columns 0-5 and 19-23, 2 on 6-18, 3 on 24."""
+    from .stress_support import Field
+    ids = np.tile(np.array([1] * 6 + [2] * 13 + [1] * 5 + [3]), (7, 1)).astype(np.int64)
+    radiance = np.repeat(np.array([0.0, 1.0, 100.0, 50.0])[ids][..., None], 3, 2)
+    return Field(ids, radiance, np.ones((7, 25, 3)), np.zeros((7, 25), np.uint32), 0)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_known_leak_into_a_region_found_by_refinement(mode):
+    """Reported: values leak between ids in fast/refine.  Refinement finds the
+    second stripe of shape 1 (grid: rows 0, 6; columns 0, 6, 12, 18, 24), but
+    no grid sample of shape 1 is in its pixels' 4 x 4 blocks, so they take the
+    nearest grid sample of any id (100 or 50) instead of 1."""
+    fld = _stripes_field()
+    case = Case(7, 25, 10 / 175)
+    out = case.run(mode, fld)
+    one = out.ids == out.ids[0, 0]
+    wrong = one & (np.abs(out.image[..., 0] - 1.0) > 1e-5)
+    assert not wrong.any(), (f"{int(wrong.sum())} pixels of shape 1 (all samples 1.0) hold "
+                             f"{np.unique(out.image[wrong, 0]).tolist()}")
+
+
+@pytest.mark.parametrize("mode", ["paper", "fast"])
+def test_known_leak_after_smoothing(mode):
+    """The id smoothing grows shape 1 (one sample, 1.25) two grid rows down a
+    4 x 2 image traced in column 0; pixel (2, 1) then has no sample of its id
+    in its 4 x 4 block and takes the background's 0.13."""
+    p = grid_pattern(2, 4, 0.5)
+    radiance = np.array([[1.25] * 3, [0.13] * 3, [0.13] * 3, [0.13] * 3])
+    out = reconstruct(p, _trace(4, radiance, np.ones((4, 3)), [1, 0, 0, 0]),
+                      MRTParams(sample_fraction=0.5), mode)
+    one = (out.ids == out.ids[0, 0]) & ~out.traced_mask
+    assert np.allclose(out.image[one], 1.25, rtol=1e-5), out.image[..., 0]
