@@ -21,7 +21,7 @@ _COMMON = dict(deadline=None, database=None, print_blob=False,
                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                       HealthCheck.filter_too_much])
 
-settings.register_profile("fast", max_examples=8, derandomize=True, **_COMMON)
+settings.register_profile("fast", max_examples=6, derandomize=True, **_COMMON)
 settings.register_profile("thorough",
                           max_examples=int(os.environ.get("MITSUBA_MRT_STRESS_EXAMPLES", 1000)),
                           **_COMMON)
