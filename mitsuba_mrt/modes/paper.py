@@ -13,7 +13,7 @@ from collections import Counter
 import numpy as np
 
 from ..recon.compose import albedo_constant_per_id, compose, demodulate, region_albedo, safe_albedo
-from ..recon.edges import quadtree_fill, region_boxes, smooth_ids
+from ..recon.edges import id_boxes, quadtree_fill, smooth_ids
 from ..recon.interpolate import interpolate_regions
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, Reconstruction, Skips, SparseTrace, Timings, Tracer
@@ -40,9 +40,11 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
         ids = np.full((pattern.height, pattern.width), sample_ids[0], dtype=np.int64)
         skips.edge_finding += 1
     else:
-        grid_ids = sample_ids.reshape(pattern.grid_shape)
-        ids = smooth_ids(quadtree_fill(pattern, grid_ids), params.filter_sigma,
-                         params.filter_cutoff, boxes=region_boxes(pattern, grid_ids))
+        # the boxes of the filled map: an empty quadtree cell may take the id
+        # of a sample far from it, beyond the box its samples would give
+        filled = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))
+        ids = smooth_ids(filled, params.filter_sigma, params.filter_cutoff,
+                         boxes=id_boxes(filled))
     timings.edges = time.perf_counter() - start
 
     start = time.perf_counter()

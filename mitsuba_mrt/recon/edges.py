@@ -201,10 +201,13 @@ def _interval_levels(length: int, lines: np.ndarray, nearest: np.ndarray,
 def region_boxes(pattern: SamplePattern, grid_ids: np.ndarray) -> dict:
     """Pixel bounding box (r0, r1, c0, c1) of each id, for :func:`smooth_ids`.
 
-    Holds for the nearest-sample fill and for :func:`quadtree_fill`: either
-    gives a pixel an id only from a traced pixel of that id on a grid line
-    next to it, so an id's pixels lie between the grid lines on either side
-    of its outermost samples, and the box reaches one grid line beyond them.
+    Holds for the nearest-sample fill (:meth:`SamplePattern.nearest_image`):
+    it gives a pixel an id only from a traced pixel of that id on a grid
+    line next to it, so an id's pixels lie between the grid lines on either
+    side of its outermost samples, and the box reaches one grid line beyond
+    them.  Not for :func:`quadtree_fill`, which fills an empty rectangle
+    from the sample nearest to its parent's corner, however far that is:
+    use :func:`id_boxes` there.
     """
     nr, nc = grid_ids.shape
     flat = grid_ids.ravel()
@@ -221,6 +224,36 @@ def region_boxes(pattern: SamplePattern, grid_ids: np.ndarray) -> dict:
     c0 = np.where(lo_x > 0, cols[np.maximum(lo_x - 1, 0)], 0)
     c1 = np.where(hi_x < nc - 1, cols[np.minimum(hi_x + 1, nc - 1)] + 1, pattern.width)
     return {int(v): (int(a), int(b), int(c), int(d)) for v, a, b, c, d in zip(values, r0, r1, c0, c1)}
+
+
+def id_boxes(ids: np.ndarray) -> dict:
+    """Pixel bounding box (r0, r1, c0, c1) of each id of an id map, for :func:`smooth_ids`.
+
+    Found from the runs of equal ids along the rows (one comparison per
+    pixel, then work per run), so it holds for any map.
+
+    Examples
+    --------
+    >>> id_boxes(np.array([[1, 1, 2], [3, 1, 1]]))
+    {1: (0, 2, 0, 3), 2: (0, 1, 2, 3), 3: (1, 2, 0, 1)}
+    """
+    ids = np.asarray(ids)
+    height, width = ids.shape
+    starts = np.ones(ids.shape, dtype=bool)
+    np.not_equal(ids[:, 1:], ids[:, :-1], out=starts[:, 1:])
+    flat = np.flatnonzero(starts)  # run starts, row-major
+    ends = np.append(flat[1:], ids.size) - 1  # the next run's start - 1 ...
+    row = flat // width
+    ends = np.minimum(ends, (row + 1) * width - 1)  # ... within the row
+    values = ids.ravel()[flat]
+    order = np.argsort(values, kind="stable")
+    labels, first = np.unique(values[order], return_index=True)
+    r0 = np.minimum.reduceat(row[order], first)
+    r1 = np.maximum.reduceat(row[order], first) + 1
+    c0 = np.minimum.reduceat((flat - row * width)[order], first)
+    c1 = np.maximum.reduceat((ends - row * width)[order], first) + 1
+    return {int(v): (int(a), int(b), int(c), int(d))
+            for v, a, b, c, d in zip(labels, r0, r1, c0, c1)}
 
 
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,

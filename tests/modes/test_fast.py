@@ -7,7 +7,7 @@ from mitsuba_mrt.recon import quadric_jit as fast_jit
 from mitsuba_mrt.recon import within_region as fast
 from mitsuba_mrt.runtime import jit, threads
 from mitsuba_mrt.recon.compose import ALBEDO_EPS, albedo_constant_per_id
-from mitsuba_mrt.recon.edges import quadtree_fill, region_boxes, smooth_ids
+from mitsuba_mrt.recon.edges import id_boxes, quadtree_fill, region_boxes, smooth_ids
 from mitsuba_mrt.recon.within_region import interpolate_within_ids, local_poly_fit, separable_cubic
 
 
@@ -60,17 +60,23 @@ def test_interpolation_never_crosses_an_edge():
 @pytest.mark.parametrize("fill", ["nearest", "quadtree"])
 @pytest.mark.parametrize("seed", range(4))
 def test_region_boxes_hold_every_pixel_of_each_id(fill, seed):
+    # region_boxes (from the grid) for the nearest-sample fill, id_boxes
+    # (from the map) for the quadtree's
     rng = np.random.default_rng(seed)
     p = grid_pattern(int(rng.integers(20, 90)), int(rng.integers(20, 90)), rng.uniform(0.03, 0.3))
     ids = rng.integers(0, 5, p.grid_shape)
     if seed % 2:  # blocky ids, as real regions are
         ids = np.repeat(np.repeat(ids, 4, axis=0), 4, axis=1)[:p.grid_shape[0], :p.grid_shape[1]]
     id_map = p.nearest_image(ids) if fill == "nearest" else quadtree_fill(p, ids)
-    for value, (r0, r1, c0, c1) in region_boxes(p, ids).items():
+    boxes = region_boxes(p, ids) if fill == "nearest" else id_boxes(id_map)
+    for value, (r0, r1, c0, c1) in boxes.items():
         inside = np.zeros_like(id_map, dtype=bool)
         inside[r0:r1, c0:c1] = True
         assert not ((id_map == value) & ~inside).any()
-    assert np.array_equal(smooth_ids(id_map, 1.5, 0.1, boxes=region_boxes(p, ids)),
+        if fill == "quadtree":  # and tight
+            assert ((id_map == value) & inside).any(axis=1)[r0] and \
+                ((id_map == value) & inside).any(axis=0)[c1 - 1]
+    assert np.array_equal(smooth_ids(id_map, 1.5, 0.1, boxes=boxes),
                           smooth_ids(id_map, 1.5, 0.1))
 
 

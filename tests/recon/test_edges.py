@@ -248,3 +248,32 @@ def test_threshold_without_division_selects_what_the_division_does():
         values = np.concatenate([near, (rng.random(50) * peak).astype(np.float32), [0, peak]])
         values = values.astype(np.float32)
         assert np.array_equal(values >= t, values / peak > cutoff), (peak, cutoff)
+
+
+def test_quadtree_fill_beyond_the_grid_boxes_is_smoothed_without_crash():
+    # Found by the stress suite: a 1 x 4 grid on an 8 x 2 image.  The empty
+    # cell of rows [1, 2) x columns [0, 4) takes id 1 from the sample at
+    # column 0, although column 3 is nearer to the sample of id 2 at column
+    # 2; boxes from the grid (region_boxes) end at column 2 and the
+    # smoothing's masks did not fit.  id_boxes reads the map itself.
+    from mitsuba_mrt.recon.edges import id_boxes
+
+    p = grid_pattern(8, 2, 0.3)
+    filled = quadtree_fill(p, np.array([[1, 2, 2, 2]]))
+    assert filled[1, 3] == 1
+    assert id_boxes(filled)[1] == (0, 2, 0, 4)
+    assert np.array_equal(smooth_ids(filled, 1.0, 0.05, boxes=id_boxes(filled)),
+                          smooth_ids(filled, 1.0, 0.05))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_id_boxes_are_the_tight_boxes(seed):
+    from mitsuba_mrt.recon.edges import id_boxes
+
+    rng = np.random.default_rng(seed)
+    ids = rng.integers(0, 4, (int(rng.integers(1, 9)), int(rng.integers(1, 9))))
+    want = {}
+    for v in np.unique(ids).tolist():
+        r, c = np.nonzero(ids == v)
+        want[v] = (r.min(), r.max() + 1, c.min(), c.max() + 1)
+    assert id_boxes(ids) == want
