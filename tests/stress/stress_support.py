@@ -75,7 +75,8 @@ class Field:
             self.visible[r, c].copy() if aovs else np.zeros(n, np.uint32),
             self.num_lights, 1, 0.0)
 
-    def tracer(self, pixel_xy, seed_offset=1, aovs=True, radiance=True) -> SparseTrace:
+    def tracer(self, pixel_xy, *, stream=None, aovs=True, radiance=True) -> SparseTrace:
+        """The modes' :class:`mitsuba_mrt.types.Tracer` (noise-free: ``stream`` is unused)."""
         return self.at(pixel_xy, aovs, radiance)
 
     def ids(self, rule: str) -> np.ndarray:
@@ -247,17 +248,17 @@ class Case:
                  "from mitsuba_mrt import reconstruct, SparseTrace, MRTParams, grid_pattern"]
         if fld.shape_index.size <= 64:
             lines += [f"shape_index = np.array({fld.shape_index.tolist()!r})",
-                      "radiance = " + _array_code(fld.radiance, fld.shape_index),
+                      "field = " + _array_code(fld.radiance, fld.shape_index),
                       "albedo = " + _array_code(fld.albedo, fld.shape_index)]
         else:
             lines += ["import sys; sys.path.insert(0, 'tests')",
                       "from stress.stress_support import Case",
                       f"f = {self!r}.field",
-                      "shape_index, radiance, albedo = f.shape_index, f.radiance, f.albedo"]
+                      "shape_index, field, albedo = f.shape_index, f.radiance, f.albedo"]
         lines += [
-            "def tracer(xy, seed_offset=1, aovs=True, radiance_=True):",
+            "def tracer(xy, *, stream=None, aovs=True, radiance=True):",
             "    r, c = xy[:, 1], xy[:, 0]; n = len(xy)",
-            "    return SparseTrace(radiance[r, c] if radiance_ else np.zeros((n, 3)),",
+            "    return SparseTrace(field[r, c] if radiance else np.zeros((n, 3)),",
             "                       albedo[r, c] if aovs else np.zeros((n, 3)),",
             "                       shape_index[r, c] if aovs else np.zeros(n, np.int64),",
             "                       np.zeros(n, np.uint32), 0, 1, 0.0)",
