@@ -65,6 +65,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     image, counts = values.finish(rank_map)
     skips.add(skips_from(counts))
     stats["edge_pixels"] = counts["edge_pixels"]
+    stats["fireflies"] = counts["fireflies"]
     id_map = id_map.result()
     timings.interpolate = time.perf_counter() - start
     return Reconstruction(image, id_map, pattern.mask, timings, skips, stats)
