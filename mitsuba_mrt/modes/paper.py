@@ -3,6 +3,8 @@
 Quadtree fill and Gaussian smoothing of the grid's ids find the regions; a
 linear RBF through each id's capstones and secondary samples interpolates
 its irradiance (radiance / albedo), multiplied back by the region's albedo.
+Beyond the report: fireflies are kept out of the RBF, and every pixel is
+clamped to the range of its id's samples nearby (:mod:`mitsuba_mrt.recon.bounds`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from collections import Counter
 
 import numpy as np
 
+from ..recon.bounds import clamp_to_samples, suppress_fireflies
 from ..recon.compose import albedo_constant_per_id, compose, demodulate, region_albedo, safe_albedo
 from ..recon.edges import id_boxes, quadtree_fill, smooth_ids
 from ..recon.interpolate import interpolate_regions
@@ -50,11 +53,18 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
     start = time.perf_counter()
     # one albedo per id: radiance interpolates as albedo x irradiance would
     modulated = not albedo_constant_per_id(sample_ids, safe_albedo(trace.albedo))
+    values = demodulate(trace.radiance, trace.albedo) if modulated else trace.radiance
+    # a firefly takes part in no other pixel's value; then every pixel is held
+    # to the range of its id's samples nearby (the RBF overshoots between
+    # samples and extrapolates without bound away from them)
+    grid_ids = sample_ids.reshape(pattern.grid_shape)
+    grid_values, stats["fireflies"] = suppress_fireflies(
+        grid_ids, np.asarray(values, dtype=np.float64).reshape(pattern.grid_shape + (3,)))
     interp = interpolate_regions(
-        ids, pattern.pixel_xy, sample_ids,
-        demodulate(trace.radiance, trace.albedo) if modulated else trace.radiance,
+        ids, pattern.pixel_xy, sample_ids, grid_values.reshape(-1, 3),
         max_inpoints=params.max_inpoints, num_cappoints=params.num_cappoints,
         rbf_degree=params.rbf_degree)
+    clamp_to_samples(pattern, grid_ids, grid_values, ids, interp.values)
     if modulated:
         albedo = region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo,
                                nearest=pattern.nearest_image(np.arange(pattern.count)))
