@@ -256,7 +256,8 @@ def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, m
             return function(*args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(fast_mode, "smooth_ids", spy("smoothing", fast_mode.smooth_ids))
+    monkeypatch.setattr(fast_mode, "smooth_ids_by_score",
+                        spy("smoothing", fast_mode.smooth_ids_by_score))
     monkeypatch.setattr(fast_jit, "_quadric_values", spy("fits", fast_jit._quadric_values))
     p = grid_pattern(48, 40, 0.15)
     shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)
@@ -264,3 +265,33 @@ def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, m
     reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
     assert seen == {"smoothing": 1, "fits": three_jit_threads}
     assert dr.thread_count() == three_jit_threads
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_traced_pixels_keep_their_ids_and_numbering_does_not_matter(seed):
+    # Found by the stress suite: the report's smoothing dilates the ids in
+    # increasing order, so the larger id took traced pixels of the smaller,
+    # and renumbering the shapes changed the image.
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(12, 40)), int(rng.integers(12, 40))
+    p = grid_pattern(w, h, float(rng.uniform(0.1, 0.6)))
+    yy, xx = np.mgrid[:h, :w]
+    k = int(rng.integers(2, 6))
+    sx, sy = rng.uniform(0, w, k), rng.uniform(0, h, k)
+    labels = np.argmin((xx[..., None] - sx) ** 2 + (yy[..., None] - sy) ** 2, axis=-1)
+    shapes = labels if seed % 2 else labels + 1  # with and without a background
+    values = rng.uniform(0.1, 2.0, (k, 3))[labels] * (1 + 0.01 * xx[..., None])
+    xy = p.pixel_xy
+
+    def run(shape_index):
+        trace = SparseTrace(values[xy[:, 1], xy[:, 0]], np.ones((p.count, 3)),
+                            shape_index[xy[:, 1], xy[:, 0]], np.zeros(p.count, np.uint32),
+                            0, 1, 0.0)
+        return reconstruct(p, trace, MRTParams(sample_fraction=0.3), "fast")
+
+    out = run(shapes)
+    assert np.array_equal(out.ids[p.mask], (shapes[p.mask].astype(np.int64) << 32))
+    new = np.zeros(k + 1, np.int64)
+    new[1:] = rng.permutation(np.arange(1, k + 1)) * 5 + 2
+    other = run(new[shapes])
+    assert np.array_equal(other.image, out.image)
