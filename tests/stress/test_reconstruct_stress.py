@@ -19,11 +19,28 @@ from .stress_support import (ALBEDOS, CONSTANT_ALBEDOS, MODES, VALUES, Case, bou
                              cases, check, degenerate_cases, finish, ratio, region_samples)
 
 
-def property_test(prop, strategy):
-    """A test of ``prop`` per mode; ``body(case, mode, data) -> (problems, measure)``."""
+#: Mode paper keeps the report's Algorithm 2, whose smoothing dilates the ids
+#: one after the other in increasing order: a larger id grows over a smaller
+#: one, traced pixels included, so the result depends on the numbering.  Mode
+#: fast smooths the same way, order-free, and keeps traced ids.
+PAPER_ALGORITHM_2 = ("mode paper keeps the report's Algorithm 2: its smoothing dilates "
+                     "the ids in increasing order, over traced pixels and by number")
+
+
+def property_test(prop, strategy, exceptions=None):
+    """A test of ``prop`` per mode; ``body(case, mode, data) -> (problems, measure)``.
+
+    ``exceptions``: ``{mode: reason}`` for modes that document why the
+    property does not hold for them (they are skipped, with the reason).
+    """
+    exceptions = exceptions or {}
+
     def decorate(body):
         @pytest.mark.parametrize("mode", MODES)
         def test(mode):
+            if mode in exceptions:
+                pytest.skip(exceptions[mode])
+
             @given(case=strategy, data=st.data())
             def inner(case, data):
                 check(prop, mode, case, lambda: body(case, mode, data))
@@ -73,7 +90,7 @@ def test_traced_pixels_are_exact(case, mode, data):
     return [], 0.0
 
 
-@property_test("traced_ids", cases())
+@property_test("traced_ids", cases(), exceptions={"paper": PAPER_ALGORITHM_2})
 def test_traced_ids_are_kept(case, mode, data):
     """The output id map gives every traced pixel the id it was traced with
     (the regions the other properties use are the output's)."""
@@ -146,7 +163,7 @@ def test_scale_invariance(case, mode, data):
     return [], 0.0
 
 
-@property_test("relabel_invariance", cases())
+@property_test("relabel_invariance", cases(), exceptions={"paper": PAPER_ALGORITHM_2})
 def test_relabel_invariance(case, mode, data):
     """Permuting the (non-background) shape labels leaves the image unchanged."""
     fld = case.field
