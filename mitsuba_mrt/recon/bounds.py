@@ -84,21 +84,54 @@ def region_ranges(ids: np.ndarray, values: np.ndarray,
 
 def _neighbour_max(grid_ids: np.ndarray, grid_values: np.ndarray) -> np.ndarray:
     """(nr, nc, C): the largest value of the other samples of each sample's id in
-    its 3 x 3 grid neighbourhood; -inf where there is none."""
+    its 3 x 3 grid neighbourhood; -inf where there is none.
+
+    Inside a region (3 x 3 ids all equal, off the grid's border) it is the
+    largest of the 8 neighbours, a few separable maxima over the whole grid;
+    the other samples (near edges, on the border) are gathered one by one.
+    """
     nr, nc = grid_ids.shape
     out = np.full(grid_values.shape, -np.inf, dtype=grid_values.dtype)
+    inner = np.zeros((nr, nc), dtype=bool)
+    if nr >= 3 and nc >= 3:
+        ids = grid_ids
+        lo = np.minimum(np.minimum(ids[:, :-2], ids[:, 1:-1]), ids[:, 2:])
+        hi = np.maximum(np.maximum(ids[:, :-2], ids[:, 1:-1]), ids[:, 2:])
+        lo = np.minimum(np.minimum(lo[:-2], lo[1:-1]), lo[2:])
+        hi = np.maximum(np.maximum(hi[:-2], hi[1:-1]), hi[2:])
+        inner[1:-1, 1:-1] = lo == hi
+        v = grid_values
+        across = np.maximum(v[:, :-2], v[:, 1:-1])  # along the rows, 3 wide
+        np.maximum(across, v[:, 2:], out=across)
+        inner_out = out[1:-1, 1:-1]  # (in place: fresh temporaries cost page faults)
+        np.maximum(across[:-2], across[2:], out=inner_out)
+        np.maximum(inner_out, v[1:-1, :-2], out=inner_out)
+        np.maximum(inner_out, v[1:-1, 2:], out=inner_out)
+    rest = np.flatnonzero(~inner)
+    if len(rest) == 0:
+        return out
+    channels = grid_values.shape[-1]
+    flat_ids = grid_ids.ravel()
+    # channel-major: the gathers and selects below are 1-D and contiguous
+    by_channel = np.ascontiguousarray(grid_values.reshape(-1, channels).T)
+    ry, rx = np.divmod(rest, nc)
+    own = flat_ids[rest]
+    found = np.full((channels, len(rest)), -np.inf, dtype=grid_values.dtype)
     for dy in (-1, 0, 1):
+        y = ry + dy
+        y_ok = (y >= 0) & (y < nr)
+        row = np.clip(y, 0, nr - 1) * nc
         for dx in (-1, 0, 1):
             if not (dy or dx):
                 continue
-            # samples (y, x) whose neighbour (y + dy, x + dx) lies on the grid
-            here = (slice(max(-dy, 0), nr - max(dy, 0)), slice(max(-dx, 0), nc - max(dx, 0)))
-            there = (slice(max(dy, 0), nr + min(dy, 0)), slice(max(dx, 0), nc + min(dx, 0)))
-            same = grid_ids[here] == grid_ids[there]
-            if not same.any():
-                continue
-            np.maximum(out[here], np.where(same[..., None], grid_values[there], -np.inf),
-                       out=out[here])
+            x = rx + dx
+            index = row + np.clip(x, 0, nc - 1)
+            same = y_ok & (x >= 0) & (x < nc) & (flat_ids.take(index) == own)
+            if same.any():
+                for c in range(channels):
+                    np.maximum(found[c], np.where(same, by_channel[c].take(index), -np.inf),
+                               out=found[c])
+    out.reshape(-1, channels)[rest] = found.T
     return out
 
 
@@ -209,22 +242,26 @@ def neighbourhood_ranges(grid_ids: np.ndarray, grid_values: np.ndarray, cell_y: 
     """
     nr, nc = grid_ids.shape
     channels = grid_values.shape[-1]
-    lo = np.full((len(own), channels), np.inf, dtype=grid_values.dtype)
-    hi = np.full((len(own), channels), -np.inf, dtype=grid_values.dtype)
+    flat_ids = grid_ids.ravel()
+    # channel-major copies: every gather and select below is then 1-D and contiguous
+    by_channel = np.ascontiguousarray(grid_values.reshape(-1, channels).T)
+    lo = np.full((channels, len(own)), np.inf, dtype=grid_values.dtype)
+    hi = np.full((channels, len(own)), -np.inf, dtype=grid_values.dtype)
     found = np.zeros(len(own), dtype=bool)
+    cols = [np.clip(cell_x + dx, 0, nc - 1) for dx in range(-1, 3)]
     for dy in range(-1, 3):
-        gy = np.clip(cell_y + dy, 0, nr - 1)
-        for dx in range(-1, 3):
-            gx = np.clip(cell_x + dx, 0, nc - 1)
-            hit = grid_ids[gy, gx] == own
+        row = np.clip(cell_y + dy, 0, nr - 1) * nc
+        for col in cols:
+            index = row + col
+            hit = flat_ids.take(index) == own
             if not hit.any():
                 continue
             found |= hit
-            index = np.flatnonzero(hit)
-            v = grid_values[gy[index], gx[index]]
-            lo[index] = np.minimum(lo[index], v)
-            hi[index] = np.maximum(hi[index], v)
-    return lo, hi, found
+            for c in range(channels):
+                v = by_channel[c].take(index)
+                np.minimum(lo[c], np.where(hit, v, np.inf), out=lo[c])
+                np.maximum(hi[c], np.where(hit, v, -np.inf), out=hi[c])
+    return lo.T, hi.T, found
 
 
 def clamp_to_samples(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np.ndarray,

@@ -367,8 +367,10 @@ def smooth_ids_by_score(ids: np.ndarray, filter_sigma: float = 1.0,
     reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation
     weights = gaussian_weights(filter_sigma, reach)
     height, width = out.shape
-    best = np.zeros(out.shape, dtype=np.float32)  # score of each pixel's id so far
-    cutoff = np.float32(filter_cutoff)
+    # score of each pixel's id so far; starting at the cutoff, "above the
+    # cutoff and above the others" is one comparison (an own id tying with
+    # the cutoff takes its own pixel back from nobody: no change)
+    best = np.full(out.shape, filter_cutoff, dtype=np.float32)
     values = sorted(boxes) if boxes is not None else np.unique(ids).tolist()
     for value in values:
         if value == background:
@@ -389,8 +391,9 @@ def smooth_ids_by_score(ids: np.ndarray, filter_sigma: float = 1.0,
             continue
         score = np.divide(blurred, peak, out=blurred)
         so_far = best[r0:r1, c0:c1]
-        take = (score > cutoff) & ((score > so_far)
-                                   | ((score == so_far) & (ids[r0:r1, c0:c1] == value)))
+        take = score > so_far
+        own = mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0]
+        take |= own & (score == so_far)  # ties go to the pixel's own id
         np.copyto(out[r0:r1, c0:c1], value, where=take)
         np.copyto(so_far, score, where=take)
     return out

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import sparse
 from scipy.spatial import cKDTree
 
-from ..runtime.threads import beside
+from ..runtime.threads import beside, for_row_blocks
 from . import quadric_jit
 from .bounds import (block_ranges, cell_row_runs, neighbourhood_ranges, power_of_two_scale,
                      suppress_fireflies)
@@ -146,7 +146,7 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     centre_x = 0.5 * (cols[gx0] + cols[np.minimum(gx0 + 1, nc - 1)])
     if use_jit is None:
         use_jit = quadric_jit.available()
-    if use_jit:
+    if use_jit:  # clamped in the kernel
         values = quadric_jit.quadric_values_jit(
             rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x, spacing,
             _RIDGE, member, py, px)
@@ -158,10 +158,10 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
         values = coeffs[member, 0]
         for b, term in enumerate((ox, oy, ox * ox, ox * oy, oy * oy), start=1):
             values += term[:, None] * coeffs[member, b]
-    lo, hi, _ = neighbourhood_ranges(grid_ids, grid_values, gy0, gx0, gid)
+        lo, hi, _ = neighbourhood_ranges(grid_ids, grid_values, gy0, gx0, gid)
+        lo[~found], hi[~found] = -np.inf, np.inf
+        np.clip(values, lo[member], hi[member], out=values)
     lost = ~found[member]
-    kept = np.flatnonzero(~lost)
-    values[kept] = np.minimum(np.maximum(values[kept], lo[member[kept]]), hi[member[kept]])
     if lost.any():
         values[lost] = nearest_of_same_id(pattern, grid_ids, grid_values, py[lost], px[lost],
                                           own[lost])
@@ -399,6 +399,10 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     return out, len(index)
 
 
+#: Images of at least this many pixels are scaled back in row blocks on all cores.
+PARALLEL_PIXELS = 1 << 18
+
+
 @dataclass
 class GridValues:
     """Values ready for the grid interpolators.
@@ -427,6 +431,28 @@ class GridValues:
     def unscaled(self, interpolated: np.ndarray) -> np.ndarray:
         """float64 values (..., C) of interpolated scaled values."""
         return interpolated * self.scale  # float32 times float64: float64
+
+    def radiance(self, interpolated: np.ndarray) -> np.ndarray:
+        """float64 radiance (height, width, 3) of interpolated scaled radiance
+        (C = 3), or irradiance and albedo (C = 6), in row blocks on all cores."""
+        height, width, channels = interpolated.shape
+        out = np.empty((height, width, 3))
+        # the scales tiled along a row: numpy broadcasts a (3,) operand slowly
+        scale = self.scale if channels == 3 else self.scale[:3] * self.scale[3:]
+        tiled = np.tile(scale, width)
+
+        def rows(start, stop):
+            flat = out[start:stop].reshape(stop - start, -1)
+            if channels == 3:
+                np.multiply(interpolated[start:stop].reshape(stop - start, -1), tiled, out=flat)
+            else:  # irradiance times albedo, multiplied in float64
+                block = interpolated[start:stop]
+                np.multiply(block[..., :3], block[..., 3:], out=out[start:stop],
+                            dtype=np.float64)
+                flat *= tiled
+
+        for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
+        return out
 
 
 @dataclass
@@ -464,8 +490,7 @@ class TracedGridValues:
         grid, constant, counts, early = self.early.result()
         interp, edge_pixels = interpolate_within_ids(
             self.pattern, self.grid_ids, grid.values, id_map, constant, early)
-        values = grid.unscaled(interp)
-        image = values if values.shape[2] == 3 else values[..., :3] * values[..., 3:]
+        image = grid.radiance(interp)
         self.pattern.put_traced(image, self.radiance)
         counts["edge_pixels"] = int(edge_pixels)
         return image, counts
