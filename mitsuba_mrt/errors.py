@@ -1,4 +1,5 @@
-"""The one exception type that the command line turns into a one-line error."""
+"""The one exception type that the command line turns into a one-line error,
+and the one warning type it prints as a line."""
 
 
 class MRTError(ValueError):
@@ -7,3 +8,8 @@ class MRTError(ValueError):
     It subclasses :class:`ValueError` so that callers who validate arguments
     the usual Python way catch it too.
     """
+
+
+class MRTWarning(UserWarning):
+    """Something in the input that is allowed but seldom meant (a negative
+    light); the command line prints it as one ``warning:`` line."""
