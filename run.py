@@ -3,6 +3,7 @@
 
     python3 run.py render   # MRT + reference of scenes_xml/paper_fig1.xml (path, 64 spp) into out/
     python3 run.py test     # the test suite
+    python3 run.py stress   # the stress suite, thorough (about 15 minutes), and its table
     python3 run.py bench ARGS...  # python -m mitsuba_mrt bench ARGS...
 
 Each command creates .venv (if missing), installs the package into it,
@@ -72,7 +73,7 @@ def ensure_llvm() -> None:
 
 
 def main(argv: list[str]) -> int:
-    if not argv or argv[0] not in ("render", "test", "bench"):
+    if not argv or argv[0] not in ("render", "test", "stress", "bench"):
         print(__doc__.strip())
         return 2
     setup()
@@ -84,6 +85,12 @@ def main(argv: list[str]) -> int:
                 "-D", "jitter=true"] + rest
     elif command == "bench":
         args = ["-m", "mitsuba_mrt", "bench"] + rest
+    elif command == "stress":
+        # 1000 cases per property and mode; tests/stress/conftest.py prints the
+        # table of cases and failures at the end
+        env = dict(os.environ, MITSUBA_MRT_STRESS="thorough")
+        args = ["-m", "pytest", "-q", "-p", "no:cacheprovider", str(ROOT / "tests" / "stress")]
+        return subprocess.run([str(PYTHON)] + args + rest, cwd=ROOT, env=env).returncode
     else:
         args = ["-m", "pytest", "-q"] + rest
     return subprocess.run([str(PYTHON)] + args, cwd=ROOT).returncode

@@ -16,14 +16,14 @@ variant changes; it changes nothing else in the process.
 
 from __future__ import annotations
 
-from .errors import MRTError
+from .errors import MRTError, MRTWarning
 from .modes import MODES, reconstruct
 from .recon.sampling import SamplePattern, grid_pattern
 from .types import MRTParams, Reconstruction, Skips, SparseTrace, Timings
 
 __version__ = "0.1.0"
 
-__all__ = ["MODES", "MRTError", "MRTParams", "MRTResult", "Reconstruction", "SamplePattern",
+__all__ = ["MODES", "MRTError", "MRTParams", "MRTWarning", "MRTResult", "Reconstruction", "SamplePattern",
            "Skips", "SparseTrace", "Timings", "activate", "grid_pattern", "load_scene",
            "reconstruct", "register", "render", "render_reference"]
 

@@ -1,4 +1,5 @@
-"""The one exception type that the command line turns into a one-line error."""
+"""The one exception type that the command line turns into a one-line error,
+and the one warning type it prints as a line."""
 
 
 class MRTError(ValueError):
@@ -22,3 +23,8 @@ def one_line(exc: BaseException) -> str:
     lines = str(exc).strip().splitlines()
     first = lines[0] if lines else ""
     return first if isinstance(exc, MRTError) else f"{type(exc).__name__}: {first}"
+
+
+class MRTWarning(UserWarning):
+    """Something in the input that is allowed but seldom meant (a negative
+    light); the command line prints it as one ``warning:`` line."""

@@ -9,8 +9,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 
-from ..errors import MRTError, one_line
+from ..errors import MRTError, MRTWarning, one_line
 from ..renderer.variants import VARIANT_CHOICES
 from ..types import DENOISERS
 
@@ -206,6 +207,28 @@ def _bench(args) -> int:
     return 0
 
 
+def innermost(exc: BaseException) -> BaseException:
+    """The exception at the bottom of ``exc``'s chain of causes (Dr.Jit wraps
+    the real error of a custom operation, e.g. Mitsuba's render, in a
+    RuntimeError that says "see above")."""
+    seen = {id(exc)}
+    while True:
+        inner = exc.__cause__ or (None if exc.__suppress_context__ else exc.__context__)
+        if inner is None or id(inner) in seen:
+            return exc
+        seen.add(id(inner))
+        exc = inner
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None,
+                  _default=warnings.showwarning):
+    """Our warnings as one ``warning:`` line; others as Python prints them."""
+    if issubclass(category, MRTWarning):
+        print(f"warning: {message}", file=sys.stderr)
+    else:
+        _default(message, category, filename, lineno, file, line)
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
@@ -213,6 +236,7 @@ def main(argv=None) -> int:
     from ..runtime import configure
 
     configure()
+    warnings.showwarning = _show_warning
     try:
         return {"render": _render, "batch": _batch, "bench": _bench}[args.command](args)
     except MRTError as exc:
@@ -222,5 +246,6 @@ def main(argv=None) -> int:
         print("error: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - never a traceback on the terminal
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        return 1
+        cause = innermost(exc)
+        print(f"error: {one_line(cause)}", file=sys.stderr)
+        return 2 if isinstance(cause, MRTError) else 1

@@ -169,21 +169,79 @@ class OutputSet:
 
     def __exit__(self, kind, error, trace) -> None:
         if kind is None:
-            umask = os.umask(0)
-            os.umask(umask)
             try:
-                for tmp, name in self._files:
-                    os.chmod(tmp, 0o666 & ~umask)
-                for tmp, name in self._files:
-                    os.replace(tmp, self.folder / name)
+                self._place_all()
                 return
-            except OSError as exc:
-                error = MRTError(f"cannot write into {self.folder}: {exc.strerror or exc}")
-        for tmp, _ in self._files:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+            except OSError as exc:  # e.g. the disk filled up
+                error = exc
+            except BaseException:  # Ctrl-C while renaming: nothing appears
+                self._remove_temporaries()
+                raise
+        self._remove_temporaries()
         if isinstance(error, OSError):
             errno_text = error.strerror or str(error)
             raise MRTError(f"cannot write into {self.folder}: {errno_text}") from None
-        if kind is None:
-            raise error
+
+    def _remove_temporaries(self) -> None:
+        for tmp, _ in self._files:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+
+    def _place_all(self) -> None:
+        """Rename every temporary file into place, or none: a failure (or an
+        interrupt) part way puts back the files the set replaced, and
+        removes those it added."""
+        umask = os.umask(0)
+        os.umask(umask)
+        for tmp, _ in self._files:
+            os.chmod(tmp, 0o666 & ~umask)
+        placed = []  # (final path, the earlier file's backup or None)
+        try:
+            for tmp, name in self._files:
+                final = self.folder / name
+                backup = None
+                if os.path.lexists(final):  # keep the earlier file until all are in place
+                    fd, backup = tempfile.mkstemp(prefix=f".{name}.", suffix=".old",
+                                                  dir=self.folder)
+                    os.close(fd)
+                    try:
+                        os.replace(final, backup)
+                    except BaseException:
+                        os.unlink(backup)
+                        raise
+                placed.append((final, backup))
+                os.replace(tmp, final)
+        except BaseException:
+            for final, backup in reversed(placed):
+                try:
+                    if backup is not None:
+                        os.replace(backup, final)
+                    elif os.path.lexists(final):
+                        os.unlink(final)
+                except OSError:
+                    pass
+            raise
+        for _, backup in placed:
+            if backup is not None:
+                try:
+                    os.unlink(backup)
+                except OSError:
+                    pass
+
+
+def check_output_folder(folder: str | os.PathLike) -> None:
+    """MRTError, before any work, if ``folder`` cannot be made or written into.
+
+    Creates nothing: the nearest existing folder on the way must be a
+    folder we may write into (a read-only file system says so too).
+    """
+    path = Path(folder).absolute()
+    probe = path
+    while not os.path.lexists(probe) and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise MRTError(f"cannot write into {folder}: {probe} is not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise MRTError(f"cannot write into {folder}: {probe} is not writable")

@@ -13,7 +13,8 @@ import numpy as np
 
 from ..recon.metrics import error_map, paper_error, psnr
 from ..types import MRTParams, Skips, Timings, TracedCounts
-from .imageio import OutputSet, write_error_png, write_exr, write_json, write_png
+from .imageio import (OutputSet, check_output_folder, write_error_png, write_exr, write_json,
+                      write_png)
 
 
 @dataclass
@@ -104,8 +105,9 @@ def run_render_job(job: RenderJob) -> RunSummary:
     from ..renderer.scene import load_scene
     from ..renderer.variants import activate, environment
 
+    check_output_folder(job.out_dir)  # before any work
     variant = activate(job.variant)
-    scene = load_scene(job.scene, **job.defines)
+    scene = load_scene(job.scene, **job.defines)  # checks the film's size
     result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode,
                     **job.param_overrides)
     stem = Path(job.scene).stem

@@ -2,9 +2,11 @@
 
 Every pixel takes the id of its nearest traced pixel (nearest row and
 nearest column, chosen independently), then the report's Gaussian smoothing
-(``filter_sigma``, ``filter_cutoff``) softens the boundaries as in mode
-``paper``; values come from :mod:`mitsuba_mrt.recon.within_region`.
-Nothing is traced beyond the grid.
+(``filter_sigma``, ``filter_cutoff``) softens the boundaries, in its
+order-free form (:func:`mitsuba_mrt.recon.edges.smooth_ids_by_score`: the
+result does not depend on how the ids are numbered), and the traced pixels
+keep their traced ids; values come from
+:mod:`mitsuba_mrt.recon.within_region`.  Nothing is traced beyond the grid.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..recon.edges import region_boxes, smooth_ids
+from ..recon.edges import region_boxes, smooth_ids_by_score
 from ..recon.ids import rank_ids
 from ..recon.sampling import SamplePattern
 from ..recon.within_region import TracedGridValues
@@ -56,8 +58,9 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     if stats["regions"] == 1:
         skips.edge_finding += 1
     else:
-        rank_map = smooth_ids(rank_map, params.filter_sigma, params.filter_cutoff,
-                              background, boxes)
+        rank_map = smooth_ids_by_score(rank_map, params.filter_sigma, params.filter_cutoff,
+                                       background, boxes)
+        pattern.put_traced(rank_map, sample_ranks)  # a traced pixel's id is known
     timings.edges = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -65,6 +68,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     image, counts = values.finish(rank_map)
     skips.add(skips_from(counts))
     stats["edge_pixels"] = counts["edge_pixels"]
+    stats["fireflies"] = counts["fireflies"]
     id_map = id_map.result()
     timings.interpolate = time.perf_counter() - start
     return Reconstruction(image, id_map, pattern.mask, timings, skips, stats)

@@ -18,8 +18,8 @@ from collections import Counter
 import numpy as np
 
 from ..recon.compose import safe_albedo
-from ..recon.sampling import SamplePattern
-from ..recon.within_region import black_background, cell_coordinates, interpolate_within_ids
+from ..recon.sampling import SamplePattern, cell_coordinates
+from ..recon.within_region import GridValues, black_background, interpolate_within_ids
 from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
                      check_radiance)
 
@@ -68,13 +68,12 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     edges_s = time.perf_counter() - start - id_pass_s - (extra.seconds if extra else 0.0)
 
     start = time.perf_counter()
-    irradiance = trace.radiance / safe_albedo(trace.albedo)
+    # irradiance over a power of two per channel: float32 work cannot overflow
+    grid = GridValues.from_samples(pattern, grid_ids, trace.radiance / safe_albedo(trace.albedo))
     constant = black_background(grid_ids.ravel(), trace.radiance, stats)
     skips = Skips(background=stats.pop("background", 0))
-    interp, edge_pixels = interpolate_within_ids(
-        pattern, grid_ids, irradiance.astype(np.float32).reshape(pattern.grid_shape + (3,)),
-        id_map, constant)
-    image = interp * albedo
+    interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values, id_map, constant)
+    image = grid.unscaled(interp) * albedo  # float64: traced pixels go in exactly
     traced_mask = pattern.mask.copy()
     if extra is not None:
         check_radiance(extra.radiance, "pixels traced for thin regions")
@@ -84,6 +83,7 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     stats["regions"] = int(len(np.unique(id_map)))
     stats["edge_pixels"] = int(edge_pixels)
     stats["sliver_pixels"] = int(len(extra_xy))
+    stats["fireflies"] = grid.fireflies
     timings = Timings(trace_more=id_pass_s + (extra.seconds if extra else 0.0), edges=edges_s,
                       interpolate=time.perf_counter() - start)
     return Reconstruction(image, id_map, traced_mask, timings, skips, stats)

@@ -3,6 +3,8 @@
 Quadtree fill and Gaussian smoothing of the grid's ids find the regions; a
 linear RBF through each id's capstones and secondary samples interpolates
 its irradiance (radiance / albedo), multiplied back by the region's albedo.
+Beyond the report: fireflies are kept out of the RBF, and every pixel is
+clamped to the range of its id's samples nearby (:mod:`mitsuba_mrt.recon.bounds`).
 """
 
 from __future__ import annotations
@@ -12,8 +14,9 @@ from collections import Counter
 
 import numpy as np
 
+from ..recon.bounds import clamp_to_samples, suppress_fireflies
 from ..recon.compose import albedo_constant_per_id, compose, demodulate, region_albedo, safe_albedo
-from ..recon.edges import quadtree_fill, region_boxes, smooth_ids
+from ..recon.edges import id_boxes, quadtree_fill, smooth_ids
 from ..recon.interpolate import interpolate_regions
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, Reconstruction, Skips, SparseTrace, Timings, Tracer
@@ -40,19 +43,28 @@ def paper_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPar
         ids = np.full((pattern.height, pattern.width), sample_ids[0], dtype=np.int64)
         skips.edge_finding += 1
     else:
-        grid_ids = sample_ids.reshape(pattern.grid_shape)
-        ids = smooth_ids(quadtree_fill(pattern, grid_ids), params.filter_sigma,
-                         params.filter_cutoff, boxes=region_boxes(pattern, grid_ids))
+        # the boxes of the filled map: an empty quadtree cell may take the id
+        # of a sample far from it, beyond the box its samples would give
+        filled = quadtree_fill(pattern, sample_ids.reshape(pattern.grid_shape))
+        ids = smooth_ids(filled, params.filter_sigma, params.filter_cutoff,
+                         boxes=id_boxes(filled))
     timings.edges = time.perf_counter() - start
 
     start = time.perf_counter()
     # one albedo per id: radiance interpolates as albedo x irradiance would
     modulated = not albedo_constant_per_id(sample_ids, safe_albedo(trace.albedo))
+    values = demodulate(trace.radiance, trace.albedo) if modulated else trace.radiance
+    # a firefly takes part in no other pixel's value; then every pixel is held
+    # to the range of its id's samples nearby (the RBF overshoots between
+    # samples and extrapolates without bound away from them)
+    grid_ids = sample_ids.reshape(pattern.grid_shape)
+    grid_values, stats["fireflies"] = suppress_fireflies(
+        grid_ids, np.asarray(values, dtype=np.float64).reshape(pattern.grid_shape + (3,)))
     interp = interpolate_regions(
-        ids, pattern.pixel_xy, sample_ids,
-        demodulate(trace.radiance, trace.albedo) if modulated else trace.radiance,
+        ids, pattern.pixel_xy, sample_ids, grid_values.reshape(-1, 3),
         max_inpoints=params.max_inpoints, num_cappoints=params.num_cappoints,
         rbf_degree=params.rbf_degree)
+    clamp_to_samples(pattern, grid_ids, grid_values, ids, interp.values)
     if modulated:
         albedo = region_albedo(ids, pattern.pixel_xy, sample_ids, trace.albedo,
                                nearest=pattern.nearest_image(np.arange(pattern.count)))

@@ -201,10 +201,13 @@ def _interval_levels(length: int, lines: np.ndarray, nearest: np.ndarray,
 def region_boxes(pattern: SamplePattern, grid_ids: np.ndarray) -> dict:
     """Pixel bounding box (r0, r1, c0, c1) of each id, for :func:`smooth_ids`.
 
-    Holds for the nearest-sample fill and for :func:`quadtree_fill`: either
-    gives a pixel an id only from a traced pixel of that id on a grid line
-    next to it, so an id's pixels lie between the grid lines on either side
-    of its outermost samples, and the box reaches one grid line beyond them.
+    Holds for the nearest-sample fill (:meth:`SamplePattern.nearest_image`):
+    it gives a pixel an id only from a traced pixel of that id on a grid
+    line next to it, so an id's pixels lie between the grid lines on either
+    side of its outermost samples, and the box reaches one grid line beyond
+    them.  Not for :func:`quadtree_fill`, which fills an empty rectangle
+    from the sample nearest to its parent's corner, however far that is:
+    use :func:`id_boxes` there.
     """
     nr, nc = grid_ids.shape
     flat = grid_ids.ravel()
@@ -221,6 +224,36 @@ def region_boxes(pattern: SamplePattern, grid_ids: np.ndarray) -> dict:
     c0 = np.where(lo_x > 0, cols[np.maximum(lo_x - 1, 0)], 0)
     c1 = np.where(hi_x < nc - 1, cols[np.minimum(hi_x + 1, nc - 1)] + 1, pattern.width)
     return {int(v): (int(a), int(b), int(c), int(d)) for v, a, b, c, d in zip(values, r0, r1, c0, c1)}
+
+
+def id_boxes(ids: np.ndarray) -> dict:
+    """Pixel bounding box (r0, r1, c0, c1) of each id of an id map, for :func:`smooth_ids`.
+
+    Found from the runs of equal ids along the rows (one comparison per
+    pixel, then work per run), so it holds for any map.
+
+    Examples
+    --------
+    >>> id_boxes(np.array([[1, 1, 2], [3, 1, 1]]))
+    {1: (0, 2, 0, 3), 2: (0, 1, 2, 3), 3: (1, 2, 0, 1)}
+    """
+    ids = np.asarray(ids)
+    height, width = ids.shape
+    starts = np.ones(ids.shape, dtype=bool)
+    np.not_equal(ids[:, 1:], ids[:, :-1], out=starts[:, 1:])
+    flat = np.flatnonzero(starts)  # run starts, row-major
+    ends = np.append(flat[1:], ids.size) - 1  # the next run's start - 1 ...
+    row = flat // width
+    ends = np.minimum(ends, (row + 1) * width - 1)  # ... within the row
+    values = ids.ravel()[flat]
+    order = np.argsort(values, kind="stable")
+    labels, first = np.unique(values[order], return_index=True)
+    r0 = np.minimum.reduceat(row[order], first)
+    r1 = np.maximum.reduceat(row[order], first) + 1
+    c0 = np.minimum.reduceat((flat - row * width)[order], first)
+    c1 = np.maximum.reduceat((ends - row * width)[order], first) + 1
+    return {int(v): (int(a), int(b), int(c), int(d))
+            for v, a, b, c, d in zip(labels, r0, r1, c0, c1)}
 
 
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
@@ -291,6 +324,78 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
         if peak > 0.0:  # blurred / peak > cutoff, without the division
             np.copyto(out[r0:r1, c0:c1], value,
                       where=blurred >= least_above(filter_cutoff, peak))
+    return out
+
+
+def smooth_ids_by_score(ids: np.ndarray, filter_sigma: float = 1.0,
+                        filter_cutoff: float = 0.05, background: int = 0,
+                        boxes: dict | None = None) -> np.ndarray:
+    """The smoothing of :func:`smooth_ids`, independent of the ids' order.
+
+    Every id except ``background`` is blurred as there, but always from its
+    pixels in ``ids`` (not from what earlier ids left of them), divided by
+    its peak: its *score*.  A pixel goes to the id with the highest score
+    above ``filter_cutoff``, keeping its own id on a tie; where no id
+    scores above the cutoff it keeps its id, and ``background`` never takes
+    a pixel.  So ids still grow into the background, while the boundary
+    between two ids is smoothed where the two score alike, whichever id is
+    the larger number (:func:`smooth_ids` lets the larger id grow over the
+    smaller).  A tie between two ids that are neither the pixel's own
+    (exactly equal blurs) goes to the one that comes first in the sorted
+    ids.
+
+    Parameters and result as :func:`smooth_ids`.
+
+    Examples
+    --------
+    >>> ids = np.zeros((1, 9), dtype=int); ids[0, 4:] = 2; ids[0, :4] = 1
+    >>> smooth_ids_by_score(ids, 1.0, 0.05).tolist() == ids.tolist()  # a straight edge stays
+    True
+    """
+    filter_sigma = float(filter_sigma)
+    filter_cutoff = float(filter_cutoff)
+    if not filter_sigma >= 0.0 or not np.isfinite(filter_sigma):
+        raise MRTError(f"filter_sigma must be a finite number >= 0, got {filter_sigma}")
+    if not 0.0 <= filter_cutoff <= 1.0:
+        raise MRTError(f"filter_cutoff must be in [0, 1], got {filter_cutoff}")
+    ids = np.asarray(ids)
+    if ids.dtype.kind not in "iu":
+        ids = ids.astype(np.int64)
+    out = ids.copy()
+    if filter_sigma == 0.0:
+        return out
+    reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation
+    weights = gaussian_weights(filter_sigma, reach)
+    height, width = out.shape
+    # score of each pixel's id so far; starting at the cutoff, "above the
+    # cutoff and above the others" is one comparison (an own id tying with
+    # the cutoff takes its own pixel back from nobody: no change)
+    best = np.full(out.shape, filter_cutoff, dtype=np.float32)
+    values = sorted(boxes) if boxes is not None else np.unique(ids).tolist()
+    for value in values:
+        if value == background:
+            continue
+        b0, b1, d0, d1 = boxes[value] if boxes is not None else (0, height, 0, width)
+        g0, g1 = max(b0 - reach, 0), min(b1 + reach, height)
+        h0, h1 = max(d0 - reach, 0), min(d1 + reach, width)
+        mask = ids[g0:g1, h0:h1] == value
+        rr = np.flatnonzero(mask.any(axis=1))
+        if len(rr) == 0:
+            continue
+        cc = np.flatnonzero(mask.any(axis=0))
+        r0, r1 = max(g0 + rr[0] - reach, 0), min(g0 + rr[-1] + reach + 1, height)
+        c0, c1 = max(h0 + cc[0] - reach, 0), min(h0 + cc[-1] + reach + 1, width)
+        blurred = _blurred_mask(mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0], weights)
+        peak = blurred.max()
+        if not peak > 0.0:
+            continue
+        score = np.divide(blurred, peak, out=blurred)
+        so_far = best[r0:r1, c0:c1]
+        take = score > so_far
+        own = mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0]
+        take |= own & (score == so_far)  # ties go to the pixel's own id
+        np.copyto(out[r0:r1, c0:c1], value, where=take)
+        np.copyto(so_far, score, where=take)
     return out
 
 

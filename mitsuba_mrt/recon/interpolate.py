@@ -8,6 +8,7 @@ spaced secondary samples, at most ``max_inpoints`` centres in all.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -86,8 +87,22 @@ def _hull_vertices(xy: np.ndarray) -> np.ndarray:
 
 
 def _is_constant(values: np.ndarray) -> bool:
+    """Whether the samples' spread is at most ``CONSTANT_RTOL`` of their
+    largest magnitude (relative: the decision does not depend on the scale)."""
     spread = np.ptp(values, axis=0).max()
-    return spread <= CONSTANT_RTOL * max(1.0, float(np.abs(values).max()))
+    return spread <= CONSTANT_RTOL * float(np.abs(values).max())
+
+
+def power_of_two_above(magnitude: float) -> float:
+    """The least power of two above ``magnitude`` (> 0), 1 for 0: dividing by
+    it is exact and brings the values into (-1, 1).
+
+    Examples
+    --------
+    >>> power_of_two_above(3.0e38) == 2.0 ** 128, power_of_two_above(0.5), power_of_two_above(0.0)
+    (True, 1.0, 1.0)
+    """
+    return math.ldexp(1.0, math.frexp(magnitude)[1]) if magnitude > 0 else 1.0
 
 
 def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndarray,
@@ -172,8 +187,11 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
             continue
         xy = sample_xy[members].astype(np.float64)
         chosen = select_centres(xy, values.mean(axis=1), max_inpoints, num_cappoints)
-        rbf = LinearRBF(xy[chosen], values[chosen], degree=rbf_degree)
-        out[pixels] = rbf(np.stack([pixels % width, pixels // width], axis=1))
+        # values over a power of two (exact): the solve and the evaluation
+        # see the same numbers at any scale, and none near float overflow
+        unit = power_of_two_above(float(np.abs(values).max()))
+        rbf = LinearRBF(xy[chosen], values[chosen] / unit, degree=rbf_degree)
+        out[pixels] = rbf(np.stack([pixels % width, pixels // width], axis=1)) * unit
         result.counts["rbf"] += 1
         result.centres[region] = len(chosen)
     return result

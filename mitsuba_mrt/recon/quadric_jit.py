@@ -57,8 +57,9 @@ def quadric_values_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
     :func:`mitsuba_mrt.recon.within_region.quadric_coefficients` (one kernel fits them all);
     pixel ``i`` at (``py[i]``, ``px[i]``) belongs to group ``member[i]``, and a
     second kernel evaluates its quadric there, reading the coefficients where
-    the first left them.  Returns float32 values (m, C); a group without any
-    sample of its id gives 0.
+    the first left them, and clamps it to the range of the samples it was
+    fitted to.  Returns float32 values (m, C); a group without any sample of
+    its id gives 0.
     """
     with jit_workers():  # two kernels: on all cores, then the workers are parked again
         return _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y,
@@ -87,6 +88,9 @@ def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, 
     # moments[(i, j)] = sum_k w_k ox^i oy^j for i + j <= 4; rhs[b][c] = sum_k w_k basis_b v_kc
     moments = {(i, j): Float64(0.0) for i in range(5) for j in range(5 - i)}
     rhs = [[Float64(0.0) for _ in range(channels)] for _ in _POWERS]
+    # range of the samples the fit uses, per channel: the fit is clamped to it
+    lowest = [Float64(np.inf) for _ in range(channels)]
+    highest = [Float64(-np.inf) for _ in range(channels)]
     oxs, inside_x = [], []
     for dx in range(-1, 3):
         gx = cell_x + dx
@@ -110,6 +114,8 @@ def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, 
                 v = dr.gather(Float64, values, index * depth + c)
                 for b, (i, j) in enumerate(_POWERS):
                     rhs[b][c] += xs[i] * oyp[j] * v
+                lowest[c] = dr.select(use, dr.minimum(lowest[c], v), lowest[c])
+                highest[c] = dr.select(use, dr.maximum(highest[c], v), highest[c])
 
     total = moments[(0, 0)]
     empty = total <= 0.0
@@ -141,7 +147,10 @@ def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, 
                 s = s - lower[k][a] * coeff[k]
             coeff[a] = s / lower[a][a]
         out.extend(coeff)
-    dr.eval(*out)  # channel-major: coefficients of channel c are out[6c:6c + 6]
+    # an empty group keeps its unclamped zero (its pixels are filled elsewhere)
+    lowest = [dr.select(empty, -np.inf, v) for v in lowest]
+    highest = [dr.select(empty, np.inf, v) for v in highest]
+    dr.eval(*out, *lowest, *highest)  # channel-major: coefficients of channel c are out[6c:6c + 6]
     group = _aligned(Int32, member, np.int32)
     ox = (_aligned(Float64, px, np.float64) - dr.gather(Float64, cx, group)) * scale
     oy = (_aligned(Float64, py, np.float64) - dr.gather(Float64, cy, group)) * scale
@@ -152,6 +161,8 @@ def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, 
         value = dr.gather(Float64, coeff[0], group)
         for b, term in enumerate(terms, start=1):
             value = dr.fma(term, dr.gather(Float64, coeff[b], group), value)
+        value = dr.clip(value, dr.gather(Float64, lowest[c], group),
+                        dr.gather(Float64, highest[c], group))
         result.append(Float32(value))
     dr.eval(*result)
     return np.stack([np.asarray(v) for v in result], axis=1)

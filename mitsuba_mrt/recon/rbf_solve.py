@@ -24,6 +24,8 @@ solved by float64 LU instead, so the answer never depends on the shortcut.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.linalg
 from scipy.linalg import blas, lapack
@@ -254,6 +256,23 @@ def _refined_cholesky(distances, poly, values, negated=None):
     scale = float(np.abs(values).max())
     if scale == 0.0 or not np.isfinite(scale):
         return (np.zeros((n, k)), np.zeros((m, k))) if scale == 0.0 else None
+    # Refine values divided by a power of two near their largest magnitude
+    # (exact): data near float64's or float32's largest finite value would
+    # overflow in the products below (the float32 solves see the residuals).
+    unit = math.ldexp(1.0, math.frexp(scale)[1])
+    try:
+        solved = _refine(approximate, product, poly, values / unit, scale / unit)
+    except ValueError:  # NaN or Inf reached scipy after all: not to be trusted
+        return None
+    return None if solved is None else (solved[0] * unit, solved[1] * unit)
+
+
+def _refine(approximate, product, poly, values, scale):
+    """Iterative refinement of ``A w + P c = values, P' w = 0`` with the
+    approximate solver ``approximate(res_f, res_g) -> (dw, dc)``; None when
+    it stalls above ``ACCEPTABLE`` or diverges."""
+    n, m = poly.shape
+    k = values.shape[1]
     lead = int(np.argmax(np.abs(values).max(axis=0)))
     share = values[:, lead] @ values / (values[:, lead] @ values[:, lead])
     share[lead] = 0.0

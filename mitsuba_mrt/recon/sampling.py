@@ -131,6 +131,24 @@ def _nearest_indices(positions: np.ndarray, length: int) -> np.ndarray:
     return np.where(take_upper, upper, lower)
 
 
+def cell_coordinates(positions: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
+    """For each pixel 0..length-1: the grid cell ``i`` with
+    ``positions[i] <= x <= positions[i + 1]`` and the fraction ``t`` across it.
+
+    Examples
+    --------
+    >>> i, t = cell_coordinates(np.array([0, 4, 8]), 9)
+    >>> i.tolist(), t.tolist()
+    ([0, 0, 0, 0, 1, 1, 1, 1, 1], [0.0, 0.25, 0.5, 0.75, 0.0, 0.25, 0.5, 0.75, 1.0])
+    """
+    x = np.arange(length)
+    if len(positions) < 2:
+        return np.zeros(length, dtype=np.int64), np.zeros(length)
+    i = np.clip(np.searchsorted(positions, x, side="right") - 1, 0, len(positions) - 2)
+    lo, hi = positions[i], positions[i + 1]
+    return i, np.clip((x - lo) / (hi - lo), 0.0, 1.0)
+
+
 def grid_pattern(width: int, height: int, sample_fraction: float) -> SamplePattern:
     """The report's grid of traced pixels.
 

@@ -25,29 +25,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import sparse
+from scipy.spatial import cKDTree
 
-from ..runtime.threads import beside
+from ..runtime.threads import beside, for_row_blocks
 from . import quadric_jit
+from .bounds import (block_ranges, cell_row_runs, neighbourhood_ranges, power_of_two_scale,
+                     suppress_fireflies)
 from .compose import albedo_constant_per_id, safe_albedo
-from .sampling import SamplePattern
-
-
-def cell_coordinates(positions: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
-    """For each pixel 0..length-1: the grid cell ``i`` with
-    ``positions[i] <= x <= positions[i + 1]`` and the fraction ``t`` across it.
-
-    Examples
-    --------
-    >>> i, t = cell_coordinates(np.array([0, 4, 8]), 9)
-    >>> i.tolist(), t.tolist()
-    ([0, 0, 0, 0, 1, 1, 1, 1, 1], [0.0, 0.25, 0.5, 0.75, 0.0, 0.25, 0.5, 0.75, 1.0])
-    """
-    x = np.arange(length)
-    if len(positions) < 2:
-        return np.zeros(length, dtype=np.int64), np.zeros(length)
-    i = np.clip(np.searchsorted(positions, x, side="right") - 1, 0, len(positions) - 2)
-    lo, hi = positions[i], positions[i + 1]
-    return i, np.clip((x - lo) / (hi - lo), 0.0, 1.0)
+from .sampling import SamplePattern, cell_coordinates
 
 
 def cubic_weights(positions: np.ndarray, length: int) -> tuple[np.ndarray, np.ndarray]:
@@ -131,8 +116,10 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     the cell, weighted by a Gaussian of one grid spacing around the cell's
     centre, and only samples with the id count.  A quadric, not a weighted
     mean, so that gradients and curvature continue up to an edge instead of
-    flattening.  Pixels whose block has no sample of their id take the
-    value of their nearest traced pixel.
+    flattening; its values are clamped, per channel, to the range of those
+    samples (a quadric overshoots where they are few).  Pixels whose block
+    has no sample of their id take the value of the nearest sample of
+    their id on the grid (:func:`nearest_of_same_id`).
 
     The pixels are grouped by (cell, id) first, so each quadric is fitted
     once (a cell holds about ``1 / sample_fraction`` pixels) and evaluated at
@@ -159,7 +146,7 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     centre_x = 0.5 * (cols[gx0] + cols[np.minimum(gx0 + 1, nc - 1)])
     if use_jit is None:
         use_jit = quadric_jit.available()
-    if use_jit:
+    if use_jit:  # clamped in the kernel
         values = quadric_jit.quadric_values_jit(
             rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x, spacing,
             _RIDGE, member, py, px)
@@ -171,10 +158,54 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
         values = coeffs[member, 0]
         for b, term in enumerate((ox, oy, ox * ox, ox * oy, oy * oy), start=1):
             values += term[:, None] * coeffs[member, b]
+        lo, hi, _ = neighbourhood_ranges(grid_ids, grid_values, gy0, gx0, gid)
+        lo[~found], hi[~found] = -np.inf, np.inf
+        np.clip(values, lo[member], hi[member], out=values)
     lost = ~found[member]
     if lost.any():
-        values[lost] = grid_values[pattern.nearest_rows[py[lost]], pattern.nearest_cols[px[lost]]]
+        values[lost] = nearest_of_same_id(pattern, grid_ids, grid_values, py[lost], px[lost],
+                                          own[lost])
     return values
+
+
+def nearest_of_same_id(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np.ndarray,
+                       py: np.ndarray, px: np.ndarray, own: np.ndarray) -> np.ndarray:
+    """Values (m, C) of the grid sample of id ``own`` nearest to each pixel (py, px).
+
+    One k-d tree over the samples of the wanted ids, in (column, row,
+    rank x (height + width)): a sample of another id is always farther
+    than any of the pixel's own, so the nearest is of the pixel's id.  A
+    pixel of an id that no grid sample carries (an id found beyond the grid,
+    such as a thin sliver traced by ``refine``) takes its nearest sample of
+    any id, as its mode then decides (``refine`` replaces them, ``idpass``
+    traces them).
+
+    Examples
+    --------
+    >>> from mitsuba_mrt.recon.sampling import grid_pattern
+    >>> p = grid_pattern(7, 1, 1.0)
+    >>> ids = np.array([[1, 2, 2, 2, 2, 2, 1]]); values = np.arange(7.0).reshape(1, 7, 1)
+    >>> nearest_of_same_id(p, ids, values, np.array([0, 0]), np.array([2, 5]),
+    ...                    np.array([1, 1]))[:, 0].tolist()
+    [0.0, 6.0]
+    """
+    nr, nc = grid_ids.shape
+    flat_ids = grid_ids.ravel()
+    wanted = np.unique(own)
+    samples = np.flatnonzero(np.isin(flat_ids, wanted))
+    labels = np.unique(flat_ids[samples])
+    at = np.searchsorted(labels, own)
+    has = at < len(labels)
+    has[has] = labels[at[has]] == own[has]
+    out = grid_values[pattern.nearest_rows[py], pattern.nearest_cols[px]]  # any id
+    if has.any():
+        gy, gx = np.divmod(samples, nc)
+        step = float(pattern.height + pattern.width)
+        rank = np.searchsorted(labels, flat_ids[samples])
+        tree = cKDTree(np.column_stack([pattern.cols[gx], pattern.rows[gy], rank * step]))
+        _, k = tree.query(np.column_stack([px[has], py[has], at[has] * step]))
+        out[has] = grid_values[gy[k], gx[k]]
+    return out
 
 
 def group_keys(keys: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -299,7 +330,12 @@ def early_values(pattern: SamplePattern, grid_ids: np.ndarray,
 
     The separable cubic at every pixel and, per pixel, the id all 16
     samples of its cubic stencil carry (-1 where they differ, and everywhere
-    on a grid under 4 x 4, where there is no cubic).
+    on a grid under 4 x 4, where there is no cubic).  The cubic is clamped,
+    per channel, to the range of the 4 x 4 block of the pixel's cell
+    (:func:`mitsuba_mrt.recon.bounds.block_ranges`): the Lagrange weights
+    have negative lobes, and a pixel must stay within its samples.  Where
+    the stencil carries one id the block (inside the stencil) does too;
+    elsewhere the cubic is not used.
     """
     nr, nc = pattern.grid_shape
     shape = (pattern.height, pattern.width)
@@ -312,6 +348,12 @@ def early_values(pattern: SamplePattern, grid_ids: np.ndarray,
         stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
         image = separable_cubic(pattern, grid_values)
         stencil_ids = stencil_id.take(fy, axis=0).take(fx, axis=1)  # two 1-D gathers
+        _, _, lo, hi = block_ranges(grid_ids, grid_values)
+        cy, _ = cell_coordinates(pattern.rows, pattern.height)
+        cx, _ = cell_coordinates(pattern.cols, pattern.width)
+        lo, hi = lo.take(cx, axis=1), hi.take(cx, axis=1)  # (nr, width, C)
+        for start, stop, i in cell_row_runs(cy):  # the rows of one grid cell share a range
+            np.clip(image[start:stop], lo[i], hi[i], out=image[start:stop])
     return EarlyValues(image, stencil_ids)
 
 
@@ -357,6 +399,62 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     return out, len(index)
 
 
+#: Images of at least this many pixels are scaled back in row blocks on all cores.
+PARALLEL_PIXELS = 1 << 18
+
+
+@dataclass
+class GridValues:
+    """Values ready for the grid interpolators.
+
+    ``values`` (grid shape + (C,), float32) are the samples' values divided
+    by ``scale`` (C,), a power of two per channel above their largest
+    magnitude (exact, and no float32 overflow whatever the data), with
+    fireflies suppressed (:func:`mitsuba_mrt.recon.bounds.suppress_fireflies`);
+    ``fireflies`` counts the samples that were.
+    """
+
+    values: np.ndarray
+    scale: np.ndarray
+    fireflies: int = 0
+
+    @classmethod
+    def from_samples(cls, pattern: SamplePattern, grid_ids: np.ndarray,
+                     values: np.ndarray) -> "GridValues":
+        """From per-sample values (count, C), any finite magnitude."""
+        values = np.asarray(values, dtype=np.float64)
+        scale = power_of_two_scale(values)
+        grid = (values / scale).astype(np.float32).reshape(pattern.grid_shape + (-1,))
+        grid, fireflies = suppress_fireflies(grid_ids, grid)
+        return cls(grid, scale, fireflies)
+
+    def unscaled(self, interpolated: np.ndarray) -> np.ndarray:
+        """float64 values (..., C) of interpolated scaled values."""
+        return interpolated * self.scale  # float32 times float64: float64
+
+    def radiance(self, interpolated: np.ndarray) -> np.ndarray:
+        """float64 radiance (height, width, 3) of interpolated scaled radiance
+        (C = 3), or irradiance and albedo (C = 6), in row blocks on all cores."""
+        height, width, channels = interpolated.shape
+        out = np.empty((height, width, 3))
+        # the scales tiled along a row: numpy broadcasts a (3,) operand slowly
+        scale = self.scale if channels == 3 else self.scale[:3] * self.scale[3:]
+        tiled = np.tile(scale, width)
+
+        def rows(start, stop):
+            flat = out[start:stop].reshape(stop - start, -1)
+            if channels == 3:
+                np.multiply(interpolated[start:stop].reshape(stop - start, -1), tiled, out=flat)
+            else:  # irradiance times albedo, multiplied in float64
+                block = interpolated[start:stop]
+                np.multiply(block[..., :3], block[..., 3:], out=out[start:stop],
+                            dtype=np.float64)
+                flat *= tiled
+
+        for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
+        return out
+
+
 @dataclass
 class TracedGridValues:
     """Within-id interpolation of the traced grid, in two halves.
@@ -368,7 +466,7 @@ class TracedGridValues:
     Radiance is interpolated directly when albedo is constant within every
     id; otherwise irradiance (radiance / albedo) and albedo are, with the
     same weights, and multiplied back.  A black background is filled, and
-    traced pixels keep their traced radiance.
+    traced pixels keep their traced radiance (the image is float64).
     """
 
     pattern: SamplePattern
@@ -385,13 +483,14 @@ class TracedGridValues:
                    beside(_values_and_early, pattern, radiance, albedo, sample_ids, background))
 
     def finish(self, id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
-        """Radiance (height, width, 3) with every pixel's values from its own id,
-        and counts: ``albedo_division`` and ``background`` (shortcuts taken),
-        ``edge_pixels`` (pixels fitted near edges)."""
-        grid_values, constant, counts, early = self.early.result()
+        """Radiance (height, width, 3), float64, with every pixel's values from
+        its own id, and counts: ``albedo_division`` and ``background``
+        (shortcuts taken), ``edge_pixels`` (pixels fitted near edges),
+        ``fireflies`` (samples kept out of the interpolation)."""
+        grid, constant, counts, early = self.early.result()
         interp, edge_pixels = interpolate_within_ids(
-            self.pattern, self.grid_ids, grid_values, id_map, constant, early)
-        image = interp if interp.shape[2] == 3 else interp[..., :3] * interp[..., 3:]
+            self.pattern, self.grid_ids, grid.values, id_map, constant, early)
+        image = grid.radiance(interp)
         self.pattern.put_traced(image, self.radiance)
         counts["edge_pixels"] = int(edge_pixels)
         return image, counts
@@ -399,20 +498,21 @@ class TracedGridValues:
 
 def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
                       sample_ids: np.ndarray, background: int = 0):
-    """The grid values to interpolate (float32, grid shape + (3,) radiance or
-    (6,) irradiance and albedo), the constant ids, the shortcut counts, and
+    """The grid values to interpolate (:class:`GridValues` of radiance, or of
+    irradiance and albedo), the constant ids, the shortcut counts, and
     :func:`early_values` of those values."""
     counts = Counter()
     albedo = safe_albedo(albedo)
     constant = black_background(sample_ids, radiance, counts, background)
     if albedo_constant_per_id(sample_ids, albedo):
         counts["albedo_division"] += 1
-        values = radiance.astype(np.float32)
+        values = radiance
     else:
-        values = np.concatenate([radiance / albedo, albedo], axis=1).astype(np.float32)
-    values = values.reshape(pattern.grid_shape + (values.shape[1],))
-    return values, constant, counts, early_values(
-        pattern, sample_ids.reshape(pattern.grid_shape), values)
+        values = np.concatenate([radiance / albedo, albedo], axis=1)
+    grid_ids = sample_ids.reshape(pattern.grid_shape)
+    grid = GridValues.from_samples(pattern, grid_ids, values)
+    counts["fireflies"] = grid.fireflies
+    return grid, constant, counts, early_values(pattern, grid_ids, grid.values)
 
 
 def interpolate_traced_grid(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,

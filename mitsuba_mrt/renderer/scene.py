@@ -3,27 +3,40 @@
 from __future__ import annotations
 
 import os
+import warnings
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass
 
 import mitsuba as mi
+import numpy as np
 
-from ..errors import MRTError
+from ..errors import MRTError, MRTWarning
 from ..types import MRTParams
+
+#: Memory a render needs per pixel, roughly: the traced AOVs, the modes' images
+#: and temporaries (float64 radiance, ids, masks) and the reference's film.
+BYTES_PER_PIXEL = 250
 
 
 def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
     """Load a Mitsuba XML scene, with ``<default>`` parameters overridden.
 
-    Raises MRTError with a one-line message for a missing or malformed file.
+    Raises MRTError with a one-line message for a missing or malformed file,
+    and for a film that is empty or needs more memory than is available
+    (:func:`check_film`); warns (:class:`MRTWarning`) about emitters of
+    negative intensity (:func:`warn_negative_emitters`).
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise MRTError(f"scene file not found: {path}")
     try:
-        return mi.load_file(path, **{k: str(v) for k, v in defines.items()})
+        scene = mi.load_file(path, **{k: str(v) for k, v in defines.items()})
     except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain Exceptions
         error = exc
+    else:
+        check_film(scene)
+        warn_negative_emitters(scene)
+        return scene
     try:  # name malformed XML as such; Mitsuba's own message is less direct
         ElementTree.parse(path)
     except ElementTree.ParseError as exc:
@@ -32,9 +45,10 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
 
 
 def _first_line(exc: Exception) -> str:
-    """The first non-empty line of an exception's message, joined with the next
-    when it ends in a colon (Mitsuba puts the detail on the following line);
-    an error this package raised inside Mitsuba (a plugin's), as it said it."""
+    """The first non-empty line of an exception's message; when it ends in a
+    colon, joined with the lines that follow (Mitsuba puts the detail there,
+    one ``- item`` a line, e.g. the names of unused parameters).  An error this
+    package raised inside Mitsuba (a plugin's) is given as it said it."""
     lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
     ours = [line for line in lines if "MRTError: " in line]
     if ours:
@@ -42,8 +56,90 @@ def _first_line(exc: Exception) -> str:
     if not lines:
         return type(exc).__name__
     if lines[0].endswith(":") and len(lines) > 1:
-        return f"{lines[0]} {lines[1]}"
+        items = [lines[1]] + [line for line in lines[2:] if line.startswith("-")]
+        return f"{lines[0]} " + ", ".join(item.lstrip("- ").strip() for item in items)
     return lines[0]
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (``MemAvailable``), else
+    the physical memory, else None."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_film(scene: mi.Scene, sensor: int = 0, available: int | None = None) -> None:
+    """Refuse, before any work, a film of no pixel or one too large for memory.
+
+    About :data:`BYTES_PER_PIXEL` bytes per pixel are needed; ``available``
+    defaults to :func:`available_memory`.
+    """
+    sensors = scene.sensors()
+    if not sensors:
+        return
+    width, height = (int(v) for v in sensors[min(sensor, len(sensors) - 1)].film().crop_size())
+    if width < 1 or height < 1:
+        raise MRTError(f"the film is {width} x {height} pixels: width and height must be "
+                       f"at least 1 (e.g. -D res=N with N >= 1)")
+    needed = BYTES_PER_PIXEL * width * height
+    available = available_memory() if available is None else available
+    if available is not None and needed > available:
+        raise MRTError(f"a {width} x {height} render needs about {_size(needed)} of memory "
+                       f"({BYTES_PER_PIXEL} bytes per pixel), more than the "
+                       f"{_size(available)} available")
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB", "TB"):
+        if n < 1000 or unit == "TB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000.0
+
+
+#: The parameters of Mitsuba's emitters that scale their emission.
+_EMISSION = ("intensity", "radiance", "irradiance")
+
+
+def warn_negative_emitters(scene: mi.Scene) -> list[str]:
+    """Warn (:class:`MRTWarning`, one line each) about emitters with a negative
+    intensity, radiance or irradiance; returns the messages.
+
+    Mitsuba renders them (light is subtracted), which is seldom meant.
+    """
+    owners = {}
+    for shape in scene.shapes():
+        emitter = shape.emitter()
+        if emitter is not None:
+            owners[id(emitter)] = shape.id()
+    messages = []
+    for position, emitter in enumerate(scene.emitters()):
+        params = mi.traverse(emitter)
+        for key in params.keys():
+            if key.split(".")[0] not in _EMISSION or not key.endswith((".value", ".data")):
+                continue
+            try:
+                least = float(np.min(np.asarray(params[key], dtype=np.float64)))
+            except (TypeError, ValueError):
+                continue
+            if least < 0:
+                kind = str(emitter).split("[")[0].strip() or "emitter"
+                name = emitter.id() or (f"of shape {owners[id(emitter)]!r}"
+                                        if owners.get(id(emitter)) else f"#{position}")
+                message = (f"emitter {name} ({kind}) has a negative {key.split('.')[0]} "
+                           f"({least:g}): it subtracts light")
+                messages.append(message)
+                warnings.warn(message, MRTWarning, stacklevel=3)
+                break
+    return messages
 
 
 def resolve_sensor(scene: mi.Scene, sensor) -> mi.Sensor:

@@ -74,6 +74,14 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),
     (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "spp must be >= 1"),
     (["render", SCENES / "paper_fraction.xml", "--mode", "magic"], "unknown mode"),
+    # Mitsuba's list of unused parameters is on the lines after its first
+    (["render", SCENES / "paper_fraction.xml", "-D", "foo=1", "-D", "bar=2"],
+     "Found unused parameters: $foo=1, $bar=2"),
+    # an empty film: Dr.Jit's "see above" error, unless refused when loading
+    (["render", SCENES / "paper_fraction.xml", "-D", "res=0"], "the film is 0 x 0 pixels"),
+    # more memory than there is: refused before any work, with an estimate
+    (["render", SCENES / "paper_fraction.xml", "-D", "res=20000"],
+     "20000 x 20000 render needs about 100.0 GB of memory (250 bytes per pixel)"),
 ]
 
 
@@ -114,3 +122,64 @@ def test_failed_write_leaves_no_partial_file(tmp_path):
     with pytest.raises(MRTError):
         write_exr(target, {"R": np.zeros((2, 2)), "bad": np.zeros(3)})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_output_folder_under_a_file_is_refused_before_any_work(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    proc = run_cli("render", SCENES / "paper_fraction.xml", "-o", blocker / "out", "-D", "res=16")
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip() == f"error: cannot write into {blocker / 'out'}: {blocker} is not a folder"
+
+
+def test_a_full_disk_is_one_line_exit_2_and_leaves_no_file(tmp_path, monkeypatch, capsys):
+    # tests run as root, where a read-only folder is writable: fail the renames instead
+    import errno
+    import os
+
+    from mitsuba_mrt.app import cli, imageio
+
+    real = os.replace
+
+    def full_disk(src, dst):
+        if str(dst).endswith(".png"):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        real(src, dst)
+
+    monkeypatch.setattr(imageio.os, "replace", full_disk)
+    code = cli.main(["render", str(SCENES / "paper_fraction.xml"), "-o", str(tmp_path / "out"),
+                     "-D", "res=16", "--no-reference", "--mode", "fast"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.strip() == f"error: cannot write into {tmp_path / 'out'}: No space left on device"
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_negative_lights_are_one_warning_line_each(tmp_path):
+    import re
+
+    text = (SCENES / "paper_fraction.xml").read_text()
+    scene = tmp_path / "negative.xml"
+    scene.write_text(re.sub(r'name="intensity" value="[^"]*"', 'name="intensity" value="-5"',
+                            text, count=1))
+    proc = run_cli("render", scene, "-o", tmp_path / "out", "-D", "res=16", "--no-reference",
+                   "--mode", "fast")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert lines == ["warning: emitter light_0 (PointLight) has a negative intensity (-5): "
+                     "it subtracts light"]
+
+
+def test_the_innermost_cause_is_reported():
+    from mitsuba_mrt.app.cli import innermost
+
+    try:
+        try:
+            raise RuntimeError("jit_var_shr(r0, r357): operands have incompatible sizes!")
+        except RuntimeError as inner:
+            raise RuntimeError("drjit.custom(...): error while performing a custom "
+                               "differentiable operation. (see above).") from inner
+    except RuntimeError as outer:
+        assert str(innermost(outer)).startswith("jit_var_shr")
+    plain = ValueError("x")
+    assert innermost(plain) is plain

@@ -248,3 +248,83 @@ def test_threshold_without_division_selects_what_the_division_does():
         values = np.concatenate([near, (rng.random(50) * peak).astype(np.float32), [0, peak]])
         values = values.astype(np.float32)
         assert np.array_equal(values >= t, values / peak > cutoff), (peak, cutoff)
+
+
+def test_quadtree_fill_beyond_the_grid_boxes_is_smoothed_without_crash():
+    # Found by the stress suite: a 1 x 4 grid on an 8 x 2 image.  The empty
+    # cell of rows [1, 2) x columns [0, 4) takes id 1 from the sample at
+    # column 0, although column 3 is nearer to the sample of id 2 at column
+    # 2; boxes from the grid (region_boxes) end at column 2 and the
+    # smoothing's masks did not fit.  id_boxes reads the map itself.
+    from mitsuba_mrt.recon.edges import id_boxes
+
+    p = grid_pattern(8, 2, 0.3)
+    filled = quadtree_fill(p, np.array([[1, 2, 2, 2]]))
+    assert filled[1, 3] == 1
+    assert id_boxes(filled)[1] == (0, 2, 0, 4)
+    assert np.array_equal(smooth_ids(filled, 1.0, 0.05, boxes=id_boxes(filled)),
+                          smooth_ids(filled, 1.0, 0.05))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_id_boxes_are_the_tight_boxes(seed):
+    from mitsuba_mrt.recon.edges import id_boxes
+
+    rng = np.random.default_rng(seed)
+    ids = rng.integers(0, 4, (int(rng.integers(1, 9)), int(rng.integers(1, 9))))
+    want = {}
+    for v in np.unique(ids).tolist():
+        r, c = np.nonzero(ids == v)
+        want[v] = (r.min(), r.max() + 1, c.min(), c.max() + 1)
+    assert id_boxes(ids) == want
+
+
+def _scores_reference(ids, sigma, cutoff, background):
+    """smooth_ids_by_score by its definition, on whole images."""
+    out = ids.copy()
+    best = np.zeros(ids.shape, np.float32)
+    for value in np.unique(ids).tolist():
+        if value == background:
+            continue
+        blurred = ndimage.gaussian_filter((ids == value).astype(np.float32), sigma)
+        score = blurred / blurred.max()
+        take = (score > np.float32(cutoff)) & ((score > best) | ((score == best) & (ids == value)))
+        out[take] = value
+        best[take] = score[take]
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_smoothing_by_score_is_its_definition_and_ignores_the_numbering(seed):
+    from mitsuba_mrt.recon.edges import id_boxes, smooth_ids_by_score
+
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(5, 40)), int(rng.integers(5, 40))
+    yy, xx = np.mgrid[:h, :w]
+    k = int(rng.integers(2, 6))
+    sx, sy = rng.uniform(0, w, k), rng.uniform(0, h, k)
+    ids = np.argmin((xx[..., None] - sx) ** 2 + 1.3 * (yy[..., None] - sy) ** 2, axis=-1)
+    background = 0 if seed % 2 else -1
+    out = smooth_ids_by_score(ids, 1.0, 0.05, background)
+    assert np.array_equal(out, _scores_reference(ids, 1.0, 0.05, background))
+    assert np.array_equal(smooth_ids_by_score(ids, 1.0, 0.05, background, id_boxes(ids)), out)
+    # renumber all ids but the background: the same regions
+    new = np.arange(k)
+    new[1:] = rng.permutation(np.arange(1, k)) * 7 + 3
+    if background < 0:
+        new[0] = 1000
+    relabelled = smooth_ids_by_score(new[ids], 1.0, 0.05, 0 if background == 0 else -1)
+    assert np.array_equal(relabelled, new[out])
+
+
+def test_smoothing_by_score_grows_ids_into_the_background_only():
+    from mitsuba_mrt.recon.edges import smooth_ids_by_score
+
+    ids = np.zeros((9, 12), dtype=int)
+    ids[:, 6:] = 2
+    ids[4, 1] = 1  # one pixel of id 1 in the background
+    out = smooth_ids_by_score(ids, 1.0, 0.05, background=0)
+    assert (out[:, 6:] == 2).all()  # the background never takes a pixel
+    assert (out[:, 4:6] == 2).all() and (out[0, :4] == 0).all()  # id 2 grows by ~1.6 pixels
+    assert (out[3:6, 0:3] == 1).all()  # the point grows as in smooth_ids
+    assert np.array_equal(out, smooth_ids(ids, 1.0, 0.05))  # apart, as smooth_ids does

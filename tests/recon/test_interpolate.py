@@ -93,3 +93,28 @@ def test_rejects_non_finite_values_and_empty_input():
         interpolate_regions(ids, np.array([[0, 0]]), np.array([0]), np.array([[np.inf]]))
     with pytest.raises(MRTError, match="zero samples"):
         interpolate_regions(ids, np.zeros((0, 2)), np.zeros(0, int), np.zeros((0, 1)))
+
+
+def test_constant_regions_are_found_at_every_scale():
+    # Found by the stress suite: the spread was compared with
+    # CONSTANT_RTOL * max(1, |max|), so at 1e-6 samples 1 and 1.5 counted as
+    # all equal (filled with their mean) and at 1 they did not (interpolated).
+    ids = np.ones((1, 4), dtype=int)
+    xy = np.array([[0, 0], [3, 0]])
+    values = np.array([[1.0], [1.5]])
+    base = interpolate_regions(ids, xy, np.ones(2, int), values)
+    for k in (1e-6, 1e-30, 3e30):
+        scaled = interpolate_regions(ids, xy, np.ones(2, int), values * k)
+        assert scaled.counts == base.counts == {"rbf": 1}
+        assert np.allclose(scaled.values, base.values * k, rtol=1e-12)
+    tiny = interpolate_regions(ids, xy, np.ones(2, int), np.array([[1e-30], [1e-30 * (1 + 1e-9)]]))
+    assert tiny.counts == {"constant": 1}
+
+
+def test_rbf_of_huge_values_is_finite():
+    ids = np.ones((12, 12), dtype=int)
+    xy = grid_xy(12)
+    values = np.random.default_rng(0).uniform(0.5, 1.0, (len(xy), 3)) * 3.0e38
+    res = interpolate_regions(ids, xy, np.ones(len(xy), int), values, rbf_degree=1)
+    assert np.isfinite(res.values).all()
+    assert np.allclose(res.values.reshape(-1, 3), values, rtol=1e-9)

@@ -142,3 +142,32 @@ def test_solving_from_centres_equals_solving_from_the_matrix(n, stalls, monkeypa
     theirs = rbf_solve.solve_linear_rbf(cdist(xy, xy), poly, values)
     for a, b in zip(ours, theirs):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("degree", [-1, 0, 1])
+def test_values_near_float32_max_are_refined_not_raised(degree):
+    # Found by the stress suite: data near float32's largest value overflowed
+    # in the refinement and scipy's solve_triangular raised a raw ValueError.
+    # The refinement now works on the data over a power of two, exactly.
+    distances, poly, values = pixel_system(150, degree)
+    big = (1.0 + np.abs(values)) * 1.5e38
+    solved = rbf_solve._refined_cholesky(distances, poly, big)
+    assert solved is not None
+    small = rbf_solve._refined_cholesky(distances, poly, big * 2.0 ** -130)
+    assert np.array_equal(solved[0] * 2.0 ** -130, small[0])
+    w, c = rbf_solve.solve_linear_rbf(distances, poly, big)
+    ref_w, ref_c = lu_reference(distances, poly, big)
+    assert np.allclose(distances @ w + poly @ c, big, rtol=1e-9)
+    assert np.allclose(w, ref_w, rtol=1e-6, atol=1e-9 * np.abs(ref_w).max())
+
+
+def test_a_value_error_inside_the_refinement_falls_back(monkeypatch):
+    distances, poly, values = pixel_system(150, 1)
+
+    def refuse(*args, **kwargs):
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(rbf_solve, "_refine", refuse)
+    assert rbf_solve._refined_cholesky(distances, poly, values) is None
+    w, c = rbf_solve.solve_linear_rbf(distances, poly, values)  # by LU
+    assert np.allclose(distances @ w + poly @ c, values)

@@ -1,0 +1,52 @@
+"""Loading scenes: film checks and warnings (renderer/scene.py)."""
+
+import warnings
+
+import mitsuba as mi
+import pytest
+
+from conftest import small_scene_xml
+from mitsuba_mrt import MRTError, MRTWarning
+from mitsuba_mrt.renderer import scene as scene_module
+from mitsuba_mrt.renderer.scene import BYTES_PER_PIXEL, check_film, warn_negative_emitters
+
+
+def test_film_too_large_for_memory_is_refused_with_an_estimate(variant):
+    scene = mi.load_string(small_scene_xml(res=100))
+    check_film(scene, available=BYTES_PER_PIXEL * 100 * 100)
+    with pytest.raises(MRTError, match=r"a 100 x 100 render needs about 2\.5 MB of memory "
+                                       r"\(250 bytes per pixel\), more than the 2\.5 MB"):
+        check_film(scene, available=BYTES_PER_PIXEL * 100 * 100 - 1)
+
+
+def test_an_empty_film_is_refused(variant, tmp_path):
+    path = tmp_path / "empty.xml"
+    path.write_text(small_scene_xml(res=0))
+    with pytest.raises(MRTError, match="the film is 0 x 0 pixels"):
+        scene_module.load_scene(path)
+
+
+def test_negative_emitters_are_named(variant):
+    xml = """<scene version="3.0.0">
+      <shape type="sphere" id="lamp"><emitter type="area"><rgb name="radiance" value="-1"/></emitter></shape>
+      <emitter type="spot" id="spot"><rgb name="intensity" value="-2, 1, 1"/></emitter>
+      <emitter type="point"><rgb name="intensity" value="3"/></emitter>
+      <emitter type="directional"><rgb name="irradiance" value="-3"/></emitter>
+    </scene>"""
+    scene = mi.load_string(xml)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        messages = warn_negative_emitters(scene)
+    assert [str(w.message) for w in caught] == messages
+    assert all(w.category is MRTWarning for w in caught)
+    assert len(messages) == 3
+    assert any("of shape 'lamp' (AreaLight) has a negative radiance (-1)" in m for m in messages)
+    assert any("emitter spot (SpotLight) has a negative intensity (-2)" in m for m in messages)
+    assert any("(DirectionalEmitter) has a negative irradiance (-3)" in m for m in messages)
+
+
+def test_unused_parameters_are_all_named():
+    error = Exception("[parser.cpp:111] Found unused parameters:\n  - $foo=1\n  - $bar=2")
+    assert scene_module._first_line(error) == \
+        "[parser.cpp:111] Found unused parameters: $foo=1, $bar=2"
+    assert scene_module._first_line(Exception("one line\nmore")) == "one line"
