@@ -55,10 +55,11 @@ MAX_REPEATS = 25
 #: Wall seconds after which a point gets no more extra rounds.
 EXTRA_ROUNDS_SECONDS = 10.0
 
-#: Warm-up rounds of a denoise point: a trace's kernels are compiled again
-#: when the spp (and what ran before) changes, until a round's sequence of
-#: calls repeats; the second round runs from cached kernels.
-DENOISE_WARMUP_ROUNDS = 2
+#: Warm-up rounds of a denoise point. Most kernels compile in the first; a
+#: trace may compile once more in a later round when the spp before it
+#: changed (``idpass`` at 1 spp: about 1.4 s at 128 x 128), which the lower
+#: median of the timed rounds leaves out.
+DENOISE_WARMUP_ROUNDS = 1
 
 #: Converged reference of a stochastic point: the mean of this many full
 #: renders (other seeds), so it has this factor times the point's spp.
