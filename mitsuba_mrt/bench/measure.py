@@ -585,6 +585,24 @@ class DenoiseRow:
         return self.status == "ok"
 
 
+#: The setting of the denoise experiment's rows of a noise-free trace.
+NOISE_FREE = "noise-free trace"
+
+
+class _ConvergedTracer:
+    """A tracer whose radiance is the converged reference's at the pixels asked for."""
+
+    def __init__(self, tracer, converged: np.ndarray):
+        self.tracer, self.converged = tracer, converged
+
+    def values(self, pixel_xy: np.ndarray) -> np.ndarray:
+        return self.converged[pixel_xy[:, 1], pixel_xy[:, 0]].astype(np.float64)
+
+    def __call__(self, pixel_xy, *, radiance: bool = True, **kwargs):
+        trace = self.tracer(pixel_xy, radiance=radiance, **kwargs)
+        return replace(trace, radiance=self.values(pixel_xy)) if radiance else trace
+
+
 class DenoiseRunner(PointRunner):
     """Measures one point of the denoise experiment; :meth:`run` returns its rows.
 
@@ -597,6 +615,11 @@ class DenoiseRunner(PointRunner):
     at every setting (without and with ``denoise``). Warm-up, alternating
     rounds (more where the ladder's full renders are fast) and the converged
     reference are those of :class:`PointRunner`.
+
+    Last, every MRT mode once more at the top spp with every traced value
+    replaced by the converged reference's (setting :data:`NOISE_FREE`, no
+    time): the error its reconstruction leaves without any noise, which no
+    denoiser of the traced pixels can remove.
     """
 
     def __init__(self, *args, **kwargs):
@@ -640,7 +663,35 @@ class DenoiseRunner(PointRunner):
         for key, status in self.failed.items():
             print(f"warning: {key[1]} at {self.point.scene} spp={key[-1]}: {status}",
                   file=sys.stderr)
-        return self._denoise_rows(), None
+        return self._denoise_rows() + self._noise_free_rows(), None
+
+    def _noise_free_rows(self) -> list:
+        from ..modes import reconstruct
+        from ..renderer.api import GridTracer, render
+        from ..renderer.scene import unwrap
+
+        top, converged = self.ladder[-1], self.converged
+        setting = self.point.settings[0]
+        rows = []
+        for m in self.mrt_methods:
+            mode = self.modes[m]
+            if mode == "auto":  # its pilot traces beyond the grid's streams
+                continue
+            out = DenoiseRow(scene=self.point.scene, group=self.point.group,
+                             sampler=self.sampler, method=m, setting=NOISE_FREE, spp=top)
+            try:
+                result = render(self.scene, spp=top, seed=0, mode=mode, **setting.params)
+                tracer = _ConvergedTracer(GridTracer(self.scene, self.scene.sensors()[0],
+                                                     unwrap(self.scene).nested, top, 0),
+                                          converged)
+                trace = replace(result.trace, radiance=tracer.values(result.pattern.pixel_xy))
+                image = reconstruct(result.pattern, trace, result.params, mode, tracer).image
+            except Exception as exc:  # noqa: BLE001 - a broken mode must not end the sweep
+                rows.append(replace(out, status=_failure(exc)))
+                continue
+            rows.append(replace(out, error_converged=_paper_error(image, converged),
+                                psnr_converged=_psnr(image, converged)))
+        return rows
 
     def _round(self, warm: bool = False, tick: bool = True) -> None:
         """Everything once: the guides, then per spp the full render and its OIDN

@@ -32,7 +32,7 @@ import numpy as np
 from ..app.imageio import atomic_path, srgb_encode
 from .experiments import (BASELINES, DENOISED_SUFFIX, EQUAL_TIME, FULL, OIDN, OIDN_NOAUX,
                           Experiment)
-from .measure import CONVERGED_FACTOR, MethodRow
+from .measure import CONVERGED_FACTOR, NOISE_FREE, MethodRow
 
 #: Columns of every CSV, in order: the fields of :class:`MethodRow`.
 CSV_COLUMNS = tuple(f.name for f in fields(MethodRow))
@@ -433,7 +433,7 @@ def denoise_curves(rows) -> dict:
         t, e = _num(r["relative_time"]), _num(r["error_converged"])
         if not (math.isfinite(t) and math.isfinite(e)):
             continue
-        group = r.get("group") or r["scene"].rsplit("/", 1)[-1].removesuffix(".xml")
+        group = _scene_of(r)
         label = _curve_label(r["method"], r["setting"])
         out.setdefault(group, {}).setdefault(label, []).append((t, e, r))
     for curves in out.values():
@@ -525,17 +525,34 @@ def _fmt_reach(t: float, how: str) -> str:
     return ("<= " if how == "<=" else "") + _md_number(t, 3)
 
 
+def _scene_of(r) -> str:
+    return r.get("group") or r["scene"].rsplit("/", 1)[-1].removesuffix(".xml")
+
+
+def noise_floors(rows) -> dict:
+    """{scene: {MRT method: error}} of the rows of a noise-free trace."""
+    out = {}
+    for r in _ok(rows):
+        if r["setting"] == NOISE_FREE and math.isfinite(_num(r["error_converged"])):
+            out.setdefault(_scene_of(r), {})[r["method"]] = _num(r["error_converged"])
+    return out
+
+
 def denoise_summary(rows) -> list:
-    """Per scene: the full render, the targets (a) and (b), and how each is met."""
+    """Per scene: the full render, the targets (a) and (b), how each is met, and the
+    lowest error of an MRT mode on a noise-free trace (``floor``: (method, error))."""
     out = []
+    floors = noise_floors(rows)
     for group, curves in denoise_curves(rows).items():
         e64, t64 = _reference_error(curves)
         a = equal_time_verdict(curves)
         mrt = _best(curves, e64, _is_mrt)
         oidn = _best(curves, e64, lambda label: label.split()[0] in (OIDN, OIDN_NOAUX))
         target = EQUAL_ERROR_TARGETS["paper_fig1" if group == "paper_fig1" else "gallery"]
+        floor = min(floors.get(group, {}).items(), key=lambda kv: kv[1],
+                    default=("-", math.nan))
         out.append({"scene": group, "full_s": t64, "full_error": e64, "a": a,
-                    "mrt": mrt, "oidn": oidn, "b_target": target,
+                    "mrt": mrt, "oidn": oidn, "b_target": target, "floor": floor,
                     "b_holds": math.isfinite(mrt[1]) and mrt[1] <= target})
     return out
 
@@ -579,11 +596,14 @@ def denoise_tables(rows) -> list:
            "the MRT is better everywhere), *gain* the smallest OIDN / MRT ratio. "
            "(b) equal error: the relative time a method needs to reach the full render's "
            "own error (interpolated on its ladder, log-log; `<=`: already at its cheapest "
-           "spp). `denoise` stage: median (largest) over the MRT's runs with it.", "",
+           "spp). `denoise` stage: median (largest) over the MRT's runs with it. "
+           "Noise-free MRT: the lowest error of an MRT mode whose traced values are all the "
+           "converged reference's (no time): what its reconstruction alone leaves, which no "
+           "denoising of the traced pixels removes.", "",
            "| scene | full s | full error | (a) worst MRT/OIDN | (a) gain | best MRT at "
            "equal error | relative time | best OIDN at equal error | relative time | (b) "
-           "target | `denoise` stage / full |",
-           "| --- | ---: | ---: | ---: | ---: | --- | ---: | --- | ---: | --- | ---: |"]
+           "target | `denoise` stage / full | noise-free MRT |",
+           "| --- | ---: | ---: | ---: | ---: | --- | ---: | --- | ---: | --- | ---: | --- |"]
     for s in summary:
         a = s["a"]
         verdict_a = ("**met**" if a["holds"] else "**not met**") + f" {_md_number(a['worst'], 3)}"
@@ -595,20 +615,25 @@ def denoise_tables(rows) -> list:
             s["scene"], _md_number(s["full_s"], 3), _md_number(s["full_error"]), verdict_a,
             _md_number(a["least_gain"], 3), s["mrt"][0], _fmt_reach(*s["mrt"][1:]),
             s["oidn"][0], _fmt_reach(*s["oidn"][1:]), verdict_b,
-            f"{_md_number(dn[0], 3)} ({_md_number(dn[1], 3)})" if dn else "-"]) + " |")
+            f"{_md_number(dn[0], 3)} ({_md_number(dn[1], 3)})" if dn else "-",
+            f"{_md_number(s['floor'][1])} ({s['floor'][0]})"]) + " |")
     if notes:
         out += [""] + [f"- {scene}: {line}" for scene, line in notes.items()]
 
     out += ["", "### Equal error", "",
-            "Relative time each method needs to reach the full render's own error.", "",
-            "| scene | method | relative time | its error at its top spp |",
-            "| --- | --- | ---: | ---: |"]
+            "Relative time each method needs to reach the full render's own error; the "
+            "MRT modes' error on a noise-free trace beside.", "",
+            "| scene | method | relative time | its error at its top spp | noise-free |",
+            "| --- | --- | ---: | ---: | ---: |"]
+    floors = noise_floors(rows)
     for group, curves in denoise_curves(rows).items():
         e64, _ = _reference_error(curves)
         for label, pts in curves.items():
             t, how = time_to_reach(pts, e64)
+            floor = floors.get(group, {}).get(label)
             out.append(f"| {group} | {label} | {_fmt_reach(t, how)} | "
-                       f"{_md_number(pts[-1][1])} |")
+                       f"{_md_number(pts[-1][1])} | "
+                       f"{'-' if floor is None else _md_number(floor)} |")
 
     out += ["", "### Equal time", "",
             "At each MRT configuration's time: the `oidn` configuration (method, quality, "

@@ -31,8 +31,14 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
         "scene", "method", "setting", "spp", "total_s", "relative_time", "error_converged",
         "psnr_converged")
     fig1 = [r for r in rows if r["scene"] == "paper_fig1.xml"]
+    noise_free = [r for r in fig1 if r["setting"] == measure.NOISE_FREE]
+    fig1 = [r for r in fig1 if r not in noise_free]
     assert {r["method"] for r in fig1} == {"full", "oidn", "oidn-noaux", "mrt-fast",
                                            "mrt-fast+oidn"}
+    assert [(r["method"], r["spp"]) for r in noise_free] == [("mrt-fast", "4")]
+    assert math.isnan(float(noise_free[0]["total_s"]))
+    assert 0 < float(noise_free[0]["error_converged"]) < float(
+        next(r for r in fig1 if r["method"] == "mrt-fast" and r["spp"] == "4")["error_converged"])
     for r in fig1:
         for column in ("total_s", "relative_time", "error_converged", "psnr_converged"):
             assert math.isfinite(float(r[column])), (r["method"], column)
