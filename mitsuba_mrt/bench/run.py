@@ -159,7 +159,11 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
             keep = 0 if experiment.pictures else (rep_setting if k == rep_point else None)
             point_rows, point_images = runner.run(keep)
             rows += point_rows
-            write_csv(csv_path, rows, columns)  # after every point: a crash keeps what was measured
+            write_csv(csv_path, rows, columns)  # after every point: a crash keeps its rows
+            if denoise and k + 1 < len(experiment.points):  # its points take minutes each
+                _write_report(out, name, experiment, rows, command, env, repeats,
+                              time.perf_counter() - started,
+                              f"after {k + 1} of {len(experiment.points)} scenes")
             if experiment.pictures:
                 picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
                                    point_images, point, experiment.pictures)
@@ -168,7 +172,21 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
                 images = (point_images, point, point.settings[rep_setting])
     seconds = time.perf_counter() - started
 
-    text_rows = read_csv(csv_path)
+    text_rows, png, md = _write_report(out, name, experiment, rows, command, env, repeats,
+                                       seconds)
+    triptych = None
+    if images is not None:
+        triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
+    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
+
+
+def _write_report(out: Path, name: str, experiment, rows, command: str, env: dict,
+                  repeats: int, seconds: float, partial: str = ""):
+    """The plot and the markdown of ``rows`` (the CSV's, as written): (text rows, png, md).
+
+    ``partial``: how far a run still going has come (said in the markdown).
+    """
+    text_rows = read_csv(out / f"{name}.csv")
     png = None
     if experiment.kind != "gallery":
         png = out / f"{name}.png"
@@ -176,20 +194,17 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
                                                                          plot_sweep)
         plot(text_rows, png, experiment)
     # for denoise, the markdown also says what its CSV leaves out: samplers, stage, failures
-    md_rows = [asdict(r) for r in rows] if denoise else text_rows
-    triptych = None
-    if images is not None:
-        triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
-
+    md_rows = [asdict(r) for r in rows] if experiment.kind == "denoise" else text_rows
     md = out / f"{name}.md"
     text = (f"Command: `{command}`\n\n"
             f"Environment: {environment_line(env)}; repeats {repeats}, more where the full "
             f"render is fast (lower median); "
-            f"wall time of the whole experiment {seconds:.0f} s.\n\n"
+            + (f"written {partial}, {seconds:.0f} s in.\n\n" if partial else
+               f"wall time of the whole experiment {seconds:.0f} s.\n\n")
             + markdown_tables(md_rows, experiment))
     with atomic_path(md) as tmp:
         Path(tmp).write_text(text)
-    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
+    return text_rows, png, md
 
 
 def _triptych(path, rows, images, point, setting):
