@@ -25,28 +25,31 @@ from ..errors import MRTError
 #: OIDN's quality presets, fastest first.
 QUALITIES = ("fast", "balanced", "high")
 
-#: The quality :func:`denoise_grid` uses: on a 2-core CPU ``fast`` takes about
-#: half of ``balanced``'s time on the grid of a 400 x 400 image and the MRT's
-#: error after it is the same within 1 % (docs/BENCHMARKS.md, Denoising).
+#: The quality :func:`denoise_grid` uses: on a 2-core CPU ``fast`` takes 0.5 to
+#: 0.85 of ``balanced``'s time on the grid of a 400 x 400 image, for an MRT error
+#: about 5 % higher; at few spp time buys more (docs/BENCHMARKS.md, Denoising).
 GRID_QUALITY = "fast"
 
 MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
            "pip install mitsuba-mrt[denoise]")
 
 _lock = threading.Lock()
-_state: dict = {}  # "module", "device", and (quality, guides) -> Filter
+_state: dict = {}  # "device", and (quality, guides, clean_aux) -> its RT filter
 
 
 def _pyoidn():
     """The pyoidn module, or MRTError naming the extra."""
     try:
         import pyoidn
-    except ImportError:  # (or an OSError of its native library, re-raised as ImportError)
+    except ImportError:
         raise MRTError(MISSING) from None
+    except OSError as exc:  # installed, but its native library does not load
+        raise MRTError(f"Intel Open Image Denoise does not load: "
+                       f"{str(exc).strip().splitlines()[0]}") from None
     return pyoidn
 
 
-def _check(pyoidn, device, what: str) -> None:
+def _check(device, what: str) -> None:
     error = device.get_error()
     if error:
         raise MRTError(f"Open Image Denoise failed ({what}): {str(error).strip().splitlines()[0]}")
@@ -58,7 +61,7 @@ def _device(pyoidn):
     if device is None:
         device = pyoidn.Device(pyoidn.OIDN_DEVICE_TYPE_CPU)
         device.commit()
-        _check(pyoidn, device, "creating the CPU device")
+        _check(device, "creating the CPU device")
         _state["device"] = device
     return device
 
@@ -73,7 +76,7 @@ def _filter(pyoidn, device, quality: str, guides: tuple, clean_aux: bool):
         flt.set_int("quality", {"fast": pyoidn.OIDN_QUALITY_FAST,
                                 "balanced": pyoidn.OIDN_QUALITY_BALANCED,
                                 "high": pyoidn.OIDN_QUALITY_HIGH}[quality])
-        _check(pyoidn, device, "creating the RT filter")
+        _check(device, "creating the RT filter")
         _state[key] = flt
     return flt
 
@@ -88,8 +91,9 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     """``color`` (height, width, 3), linear HDR radiance >= 0, denoised by OIDN's RT filter.
 
     ``albedo`` (in [0, 1]) and ``normal`` (in [-1, 1]), both (height, width, 3),
-    are the optional guides (OIDN takes a normal only with an albedo).
-    Returns float64. ``quality`` is one of :data:`QUALITIES`.
+    are the optional guides (OIDN takes a normal only with an albedo);
+    ``clean_aux`` tells OIDN they are noise-free. Returns float64.
+    ``quality`` is one of :data:`QUALITIES`.
     """
     pyoidn = _pyoidn()
     if normal is not None and albedo is None:
@@ -103,15 +107,16 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     with _lock:
         device = _device(pyoidn)
         flt = _filter(pyoidn, device, quality, tuple(images), clean_aux)
-        for name, image in images.items():
-            flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
-        flt.set_image("output", output, pyoidn.OIDN_FORMAT_FLOAT3)
-        flt.commit()  # cheap when the sizes are those of the last call
-        flt.execute()
-        _check(pyoidn, device, "denoising")
-        # the filter holds raw pointers to these arrays: point it away from them
-        for name in (*images, "output"):
-            flt.unset_image(name)
+        images["output"] = output
+        try:
+            for name, image in images.items():
+                flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
+            flt.commit()  # cheap when the sizes are those of the last call
+            flt.execute()
+            _check(device, "denoising")
+        finally:  # the filter holds raw pointers to these arrays: point it away from them
+            for name in images:
+                flt.unset_image(name)
     return output.astype(np.float64)
 
 

@@ -99,3 +99,19 @@ def test_equal_time_compares_within_each_budget():
     lines = report.denoise_tables(rows)
     assert any(line.startswith("| x | mrt-fast | 64 | 0.12 | 0.015 | oidn fast, 1 spp")
                for line in lines)
+
+
+def test_the_ladder_follows_the_sampler_and_guides_are_in_range(variant):
+    from mitsuba_mrt.renderer.guides import render_guides, sampler_spp
+    from mitsuba_mrt.renderer.scene import load_scene
+
+    fig1 = load_scene(SCENES / "paper_fig1.xml", res=16, integrator="path", spp=4,
+                      jitter="true")
+    assert [sampler_spp(fig1, n) for n in (1, 2, 8, 64)] == [
+        ("stratified", 1), ("stratified", 4), ("stratified", 9), ("stratified", 64)]
+    gallery = load_scene(SCENES / "gallery" / "cornell.xml", res=16, spp=4)
+    assert [sampler_spp(gallery, n)[1] for n in (1, 2, 8)] == [1, 2, 8]
+    albedo, normal, seconds = render_guides(fig1)
+    assert albedo.shape == normal.shape == (16, 16, 3) and seconds > 0
+    assert albedo.min() >= 0 and albedo.max() <= 1 and albedo.max() > 0.1
+    assert normal.min() >= -1 and normal.max() <= 1 and abs(normal).max() > 0.5
