@@ -28,7 +28,8 @@ import numpy as np
 from ..errors import MRTError
 
 #: The experiments, in the order ``all`` runs them.
-EXPERIMENTS = ("fraction", "filter", "pixels", "objects", "lights", "tradeoff", "gallery")
+EXPERIMENTS = ("fraction", "filter", "pixels", "objects", "lights", "tradeoff", "gallery",
+               "denoise")
 
 #: Modes that are scene-agnostic upsampling of the grid keep their own names.
 BASELINES = ("nearest", "bicubic")
@@ -43,7 +44,8 @@ AUTO = "mrt-auto"
 #: The report's figure each experiment reproduces.
 FIGURES = {"fraction": "Fig. 6", "filter": "Fig. 7", "pixels": "Fig. 8", "objects": "Fig. 9",
            "lights": "Fig. 10", "tradeoff": "none (a user's choice of setting)",
-           "gallery": "none (ordinary scenes)"}
+           "gallery": "none (ordinary scenes)",
+           "denoise": "none (issue 15: the MRT against a denoiser)"}
 
 #: The gallery's scenes: ``scenes_xml/gallery/<name>.xml``, written by
 #: ``tools/make_gallery.py``; each has ``<default>`` s ``res`` and ``spp``.
@@ -56,6 +58,24 @@ GALLERY_METHODS = ("mrt-auto", "mrt-paper", "mrt-fast", "mrt-refine", "mrt-idpas
 
 #: The gallery's picture of a scene: reference | these | error map of the first.
 GALLERY_PICTURE = ("mrt-auto", "bicubic")
+
+#: The denoise experiment's spp ladder, as asked of the scene's sampler (one
+#: that rounds, like ``stratified`` to squares, is measured at each count it
+#: takes, once); the top is the full render every time is relative to.
+DENOISE_LADDER = (1, 2, 4, 8, 16, 32, 64)
+DENOISE_LADDER_QUICK = (1, 4)
+
+#: The MRT modes of the denoise experiment, each with and without ``denoise``.
+DENOISE_METHODS = ("mrt-paper", "mrt-fast", "mrt-refine", "mrt-idpass")
+
+#: The full render denoised by OIDN, with the ``aov`` integrator's albedo and
+#: normal (1 spp, time included) and without them, at each of these qualities.
+OIDN = "oidn"
+OIDN_NOAUX = "oidn-noaux"
+OIDN_QUALITIES = ("fast", "balanced")
+
+#: The MRT's method name with ``denoise="oidn"``: ``mrt-fast+oidn``.
+DENOISED_SUFFIX = "+oidn"
 
 
 # --------------------------------------------------------------------------- methods
@@ -156,6 +176,7 @@ class Experiment:
     pictures: tuple = ()
     methods: tuple | None = None
     cache_converged: bool = False
+    ladder: tuple = ()
 
 
 def _fraction_settings(fractions, sigma=1.0, cutoff=0.05, group=""):
@@ -221,6 +242,8 @@ def build_experiment(name: str, quick: bool = False, res: int | None = None) -> 
                           f"number of {what}", points, (len(points) - 1, 0))
     if name == "gallery":
         return _gallery(quick, res)
+    if name == "denoise":
+        return _denoise(quick, res)
     # tradeoff
     side = res or (64 if quick else 400)
     spp = 4 if quick else 64
@@ -253,3 +276,30 @@ def _gallery(quick: bool, res: int | None) -> Experiment:
     return Experiment("gallery", "Every mode on ordinary Mitsuba scenes", "scene", "scene",
                       points, kind="gallery", pictures=GALLERY_PICTURE,
                       methods=GALLERY_METHODS, cache_converged=True)
+
+
+def _denoise(quick: bool, res: int | None) -> Experiment:
+    """The Fig. 1 scene (``path``, jittered) and every gallery scene, over a ladder of spp.
+
+    Each point has two settings, the MRT's defaults without and with
+    ``denoise="oidn"``; the runner (:class:`.measure.DenoiseRunner`) runs
+    every mode at both, the full render and ``oidn`` at every spp of the ladder.
+    """
+    from ..types import MRTParams
+
+    ladder = DENOISE_LADDER_QUICK if quick else DENOISE_LADDER
+    spp = max(ladder)
+    fraction = MRTParams().sample_fraction
+    settings = [Setting({"sample_fraction": fraction, "denoise": d},
+                        label=f"f={fraction:g}" + ("" if d == "none" else f", denoise={d}"))
+                for d in ("none", "oidn")]
+    fig1 = Point("paper_fig1.xml", {"res": res or (32 if quick else 400), "integrator": "path",
+                                    "spp": spp, "jitter": "true"}, spp, settings,
+                 group="paper_fig1")
+    scenes = GALLERY_SCENES[:1] if quick else GALLERY_SCENES
+    gallery = [Point(f"gallery/{name}.xml", {"res": res or (24 if quick else 128), "spp": spp},
+                     spp, settings, group=name) for name in scenes]
+    return Experiment("denoise", "The MRT against the full render denoised by Intel Open "
+                      "Image Denoise", "spp", "spp", [fig1, *gallery], kind="denoise",
+                      methods=DENOISE_METHODS[1:2] if quick else DENOISE_METHODS,
+                      cache_converged=True, ladder=ladder)

@@ -13,6 +13,12 @@ table can be redrawn from a CSV alone:
   reference | ``auto`` | ``bicubic`` | error map of ``auto``, per scene;
 - ``<experiment>.md``: the tables (:func:`markdown_tables`); for
   ``gallery`` one table, a row per scene and method.
+
+The ``denoise`` experiment has its own CSV columns
+(:data:`.measure.DENOISE_COLUMNS`), plot (:func:`plot_denoise`: error
+against time, a panel per scene, a curve per method) and tables
+(:func:`denoise_tables`: equal time, equal error, and the verdicts on the
+targets of issue 15).
 """
 
 from __future__ import annotations
@@ -24,8 +30,9 @@ from dataclasses import asdict, fields
 import numpy as np
 
 from ..app.imageio import atomic_path, srgb_encode
-from .experiments import BASELINES, EQUAL_TIME, FULL, Experiment
-from .measure import CONVERGED_FACTOR, MethodRow
+from .experiments import (BASELINES, DENOISED_SUFFIX, EQUAL_TIME, FULL, OIDN, OIDN_NOAUX,
+                          Experiment)
+from .measure import CONVERGED_FACTOR, NOISE_FREE, MethodRow
 
 #: Columns of every CSV, in order: the fields of :class:`MethodRow`.
 CSV_COLUMNS = tuple(f.name for f in fields(MethodRow))
@@ -44,15 +51,15 @@ def _fmt(value) -> str:
     return "" if value is None else str(value)
 
 
-def write_csv(path, rows) -> None:
-    """Write ``rows`` (:class:`MethodRow` s) with :data:`CSV_COLUMNS`."""
+def write_csv(path, rows, columns=CSV_COLUMNS) -> None:
+    """Write ``rows`` (dataclasses: :class:`MethodRow` s) with ``columns``."""
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as f:
             writer = csv.writer(f)
-            writer.writerow(CSV_COLUMNS)
+            writer.writerow(columns)
             for r in rows:
                 values = asdict(r)
-                writer.writerow([_fmt(values[c]) for c in CSV_COLUMNS])
+                writer.writerow([_fmt(values[c]) for c in columns])
 
 
 def read_csv(path) -> list[dict]:
@@ -273,15 +280,17 @@ def _md_number(value, digits=4) -> str:
 def markdown_tables(rows, experiment: Experiment) -> str:
     """The experiment's tables as markdown (no heading, no command)."""
     ok = _ok(rows)
-    tables = {"tradeoff": _tradeoff_table, "gallery": _gallery_table}.get(experiment.kind,
-                                                                           _sweep_tables)
+    tables = {"tradeoff": _tradeoff_table, "gallery": _gallery_table,
+              "denoise": lambda ok, _: denoise_tables(ok)}.get(experiment.kind, _sweep_tables)
     out = tables(ok, experiment)
     failed = [r for r in rows if r.get("status", "ok") != "ok"]
     if failed:
-        where = "group" if experiment.kind == "gallery" else "setting"
+        where = {"gallery": ("group",), "denoise": ("group", "setting", "spp")}.get(
+            experiment.kind, ("setting",))
         out.append("")
-        out.append("Failed runs: " + "; ".join(f"{r['method']} {r[where]}: {r['status']}"
-                                               for r in failed))
+        out.append("Failed runs: " + "; ".join(
+            f"{r['method']} {' '.join(str(r[w]) for w in where)}: {r['status']}"
+            for r in failed))
     return "\n".join(out).rstrip() + "\n"
 
 
@@ -390,3 +399,323 @@ def environment_line(env: dict) -> str:
     return (f"{env['variant']}, Mitsuba {env['mitsuba']}, Dr.Jit {env['drjit']}, "
             f"{env['cpu_count']} CPUs ({env['cpu_model']}, {env['machine']}), "
             f"{env['platform']}, Python {env['python']}")
+
+
+# --------------------------------------------------------------------------- denoise
+
+#: The targets of issue 15: (a) equal time up to this fraction of the full render;
+#: (b) equal error within these fractions (Fig. 1 scene, gallery); (c) the
+#: ``denoise`` stage within this fraction at 400 x 400.
+EQUAL_TIME_UP_TO = 0.25
+EQUAL_ERROR_TARGETS = {"paper_fig1": 0.05, "gallery": 0.10}
+DENOISE_STAGE_TARGET = 0.05
+
+
+def _is_oidn(method: str) -> bool:
+    return method in (OIDN, OIDN_NOAUX)
+
+
+def _is_mrt(method: str) -> bool:
+    return method.startswith("mrt-")
+
+
+def _curve_label(method: str, setting: str) -> str:
+    """A curve's name: the method, with OIDN's quality (``oidn fast``)."""
+    if _is_oidn(method):
+        return f"{method} {setting.split('=', 1)[-1]}"
+    return method
+
+
+def denoise_curves(rows) -> dict:
+    """{scene group: {curve label: [(relative time, error, row)] by spp}} of the ok rows."""
+    out = {}
+    for r in _ok(rows):
+        t, e = _num(r["relative_time"]), _num(r["error_converged"])
+        if not (math.isfinite(t) and math.isfinite(e)):
+            continue
+        group = _scene_of(r)
+        label = _curve_label(r["method"], r["setting"])
+        out.setdefault(group, {}).setdefault(label, []).append((t, e, r))
+    for curves in out.values():
+        for pts in curves.values():
+            pts.sort(key=lambda p: int(_num(p[2]["spp"])))
+    return out
+
+
+def _reference_error(curves: dict) -> tuple[float, float]:
+    """(error, seconds) of the full render at the top of the ladder."""
+    full = curves.get(FULL, [])
+    if not full:
+        return math.nan, math.nan
+    top = full[-1][2]
+    return _num(top["error_converged"]), _num(top["total_s"]) / _num(top["relative_time"])
+
+
+def time_to_reach(points, target: float) -> tuple[float, str]:
+    """Relative time at which a curve's error first falls to ``target``: (time, how).
+
+    ``how`` is ``""`` (interpolated, log error against log time, between the
+    last point above the target and the first at or below it), ``"<="`` (its
+    cheapest point is already there: an upper bound) or ``"not reached"``
+    (time nan).
+    """
+    previous = None
+    for t, e, _ in points:
+        if e <= target:
+            if previous is None:
+                return t, "<="
+            t0, e0 = previous
+            if e <= 0 or e0 <= e or t0 <= 0 or t <= 0:
+                return t, ""
+            w = (math.log(e0) - math.log(target)) / (math.log(e0) - math.log(e))
+            return math.exp(math.log(t0) + w * (math.log(t) - math.log(t0))), ""
+        previous = (t, e)
+    return math.nan, "not reached"
+
+
+def _frontier(points, t: float) -> float:
+    """The lowest error of ``points`` within time budget ``t`` (inf: none fits)."""
+    return min((e for pt, e, _ in points if pt <= t), default=math.inf)
+
+
+def equal_time_verdict(curves: dict, up_to: float = EQUAL_TIME_UP_TO) -> dict:
+    """Target (a): the best MRT against the best OIDN within every time budget up to ``up_to``.
+
+    At each budget (every measured time up to ``up_to``, and ``up_to``), the
+    lowest error any MRT configuration reaches within it against the lowest
+    any ``oidn`` configuration does. Returns ``holds``, ``worst`` (the
+    largest MRT / OIDN error ratio, inf where only OIDN fits), ``at`` (its
+    budget) and ``least_gain`` (the smallest OIDN / MRT error ratio where
+    both fit). Where no MRT run fits within ``up_to`` it does not hold.
+    """
+    mrt = [p for label, pts in curves.items() if _is_mrt(label) for p in pts]
+    oidn = [p for label, pts in curves.items() if label.split()[0] in (OIDN, OIDN_NOAUX)
+            for p in pts]
+    budgets = sorted({t for t, _, _ in mrt + oidn if t <= up_to} | {up_to})
+    worst, at, least_gain = 0.0, math.nan, math.inf
+    if math.isinf(_frontier(mrt, up_to)):  # no MRT run fits: nothing to compare
+        return {"holds": False, "worst": math.inf, "at": up_to, "least_gain": math.nan}
+    for t in budgets:
+        em, eo = _frontier(mrt, t), _frontier(oidn, t)
+        if math.isinf(em) and math.isinf(eo):
+            continue
+        ratio = em / eo if math.isfinite(eo) else 0.0
+        if ratio > worst:
+            worst, at = ratio, t
+        if math.isfinite(em) and math.isfinite(eo):
+            least_gain = min(least_gain, eo / em)
+    return {"holds": worst < 1.0, "worst": worst, "at": at, "least_gain": least_gain}
+
+
+def _best(curves: dict, target: float, which) -> tuple[str, float, str]:
+    """(label, relative time, how) of the curve among ``which`` that reaches ``target`` first."""
+    best = ("-", math.nan, "not reached")
+    for label, pts in curves.items():
+        if not which(label):
+            continue
+        t, how = time_to_reach(pts, target)
+        if math.isfinite(t) and not t >= _num(best[1]):
+            best = (label, t, how)
+    return best
+
+
+def _fmt_reach(t: float, how: str) -> str:
+    if how == "not reached":
+        return "not reached"
+    return ("<= " if how == "<=" else "") + _md_number(t, 3)
+
+
+def _scene_of(r) -> str:
+    return r.get("group") or r["scene"].rsplit("/", 1)[-1].removesuffix(".xml")
+
+
+def noise_floors(rows) -> dict:
+    """{scene: {MRT method: error}} of the rows of a noise-free trace."""
+    out = {}
+    for r in _ok(rows):
+        if r["setting"] == NOISE_FREE and math.isfinite(_num(r["error_converged"])):
+            out.setdefault(_scene_of(r), {})[r["method"]] = _num(r["error_converged"])
+    return out
+
+
+def denoise_summary(rows) -> list:
+    """Per scene: the full render, the targets (a) and (b), how each is met, and the
+    lowest error of an MRT mode on a noise-free trace (``floor``: (method, error))."""
+    out = []
+    floors = noise_floors(rows)
+    for group, curves in denoise_curves(rows).items():
+        e64, t64 = _reference_error(curves)
+        a = equal_time_verdict(curves)
+        mrt = _best(curves, e64, _is_mrt)
+        oidn = _best(curves, e64, lambda label: label.split()[0] in (OIDN, OIDN_NOAUX))
+        target = EQUAL_ERROR_TARGETS["paper_fig1" if group == "paper_fig1" else "gallery"]
+        floor = min(floors.get(group, {}).items(), key=lambda kv: kv[1],
+                    default=("-", math.nan))
+        out.append({"scene": group, "full_s": t64, "full_error": e64, "a": a,
+                    "mrt": mrt, "oidn": oidn, "b_target": target, "floor": floor,
+                    "b_holds": math.isfinite(mrt[1]) and mrt[1] <= target})
+    return out
+
+
+def _denoise_stage(rows) -> dict:
+    """{scene: (median, largest) of the MRT's ``denoise`` stage, relative to the full render}."""
+    out = {}
+    for group, curves in denoise_curves(rows).items():
+        _, t64 = _reference_error(curves)
+        stages = [_num(r.get("denoise_s")) / t64 for label, pts in curves.items()
+                  if label.endswith(DENOISED_SUFFIX) for _, _, r in pts]
+        stages = [s for s in stages if math.isfinite(s)]
+        if stages:
+            out[group] = (float(np.median(stages)), max(stages))
+    return out
+
+
+def _ladders(rows) -> dict:
+    """{scene: its sampler and spp ladder}, from the full render's rows."""
+    out = {}
+    for group, curves in denoise_curves(rows).items():
+        full = [p[2] for p in curves.get(FULL, [])]
+        if full:
+            sampler = full[0].get("sampler") or full[0]["setting"].split("=", 1)[-1]
+            out[group] = (f"sampler `{sampler}`, spp " + ", ".join(str(r["spp"]) for r in full))
+    return out
+
+
+def denoise_tables(rows) -> list:
+    """The denoise experiment's markdown: summary (and each scene's sampler and
+    ladder), equal error, equal time."""
+    notes = _ladders(rows)
+    summary = denoise_summary(rows)
+    stage = _denoise_stage(rows)
+    out = ["Errors: the report's metric against the converged reference (the mean of "
+           f"{CONVERGED_FACTOR} full renders at the top spp, other seeds); times: median "
+           "totals, relative to the full render at the top of the ladder (`full s`). "
+           "(a) equal time: the lowest error any MRT configuration reaches within a time "
+           f"budget against the lowest any `oidn` does, at every budget up to "
+           f"{EQUAL_TIME_UP_TO:g}; *worst* is the largest MRT / OIDN error ratio (below 1: "
+           "the MRT is better everywhere), *gain* the smallest OIDN / MRT ratio. "
+           "(b) equal error: the relative time a method needs to reach the full render's "
+           "own error (interpolated on its ladder, log-log; `<=`: already at its cheapest "
+           "spp). `denoise` stage: median (largest) over the MRT's runs with it. "
+           "Noise-free MRT: the lowest error of an MRT mode whose traced values are all the "
+           "converged reference's (no time): what its reconstruction alone leaves, which no "
+           "denoising of the traced pixels removes.", "",
+           "| scene | full s | full error | (a) worst MRT/OIDN | (a) gain | best MRT at "
+           "equal error | relative time | best OIDN at equal error | relative time | (b) "
+           "target | `denoise` stage / full | noise-free MRT |",
+           "| --- | ---: | ---: | ---: | ---: | --- | ---: | --- | ---: | --- | ---: | --- |"]
+    for s in summary:
+        a = s["a"]
+        verdict_a = ("**met**" if a["holds"] else "**not met**") + f" {_md_number(a['worst'], 3)}"
+        if not a["holds"] and math.isfinite(a["at"]):
+            verdict_a += f" at {_md_number(a['at'], 3)}"
+        verdict_b = ("**met**" if s["b_holds"] else "**not met**") + f" (<= {s['b_target']:g})"
+        dn = stage.get(s["scene"])
+        out.append("| " + " | ".join([
+            s["scene"], _md_number(s["full_s"], 3), _md_number(s["full_error"]), verdict_a,
+            _md_number(a["least_gain"], 3), s["mrt"][0], _fmt_reach(*s["mrt"][1:]),
+            s["oidn"][0], _fmt_reach(*s["oidn"][1:]), verdict_b,
+            f"{_md_number(dn[0], 3)} ({_md_number(dn[1], 3)})" if dn else "-",
+            f"{_md_number(s['floor'][1])} ({s['floor'][0]})"]) + " |")
+    if notes:
+        out += [""] + [f"- {scene}: {line}" for scene, line in notes.items()]
+
+    out += ["", "### Equal error", "",
+            "Relative time each method needs to reach the full render's own error; the "
+            "MRT modes' error on a noise-free trace beside.", "",
+            "| scene | method | relative time | its error at its top spp | noise-free |",
+            "| --- | --- | ---: | ---: | ---: |"]
+    floors = noise_floors(rows)
+    for group, curves in denoise_curves(rows).items():
+        e64, _ = _reference_error(curves)
+        for label, pts in curves.items():
+            t, how = time_to_reach(pts, e64)
+            floor = floors.get(group, {}).get(label)
+            out.append(f"| {group} | {label} | {_fmt_reach(t, how)} | "
+                       f"{_md_number(pts[-1][1])} | "
+                       f"{'-' if floor is None else _md_number(floor)} |")
+
+    out += ["", "### Equal time", "",
+            "At each MRT configuration's time: the `oidn` configuration (method, quality, "
+            "spp) whose time is closest (log scale) and error lowest.", "",
+            "| scene | method | spp | relative time | error | best OIDN there | its relative "
+            "time | its error | MRT / OIDN error |",
+            "| --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: |"]
+    for group, curves in denoise_curves(rows).items():
+        oidn = {label: pts for label, pts in curves.items()
+                if label.split()[0] in (OIDN, OIDN_NOAUX)}
+        for label, pts in curves.items():
+            if not _is_mrt(label):
+                continue
+            for t, e, r in pts:
+                near = [min(p, key=lambda q: abs(math.log(q[0] / t))) + (name,)
+                        for name, p in oidn.items() if p]
+                if not near:
+                    continue
+                ot, oe, orow, name = min(near, key=lambda q: q[1])
+                out.append(f"| {group} | {label} | {r['spp']} | {_md_number(t, 3)} | "
+                           f"{_md_number(e)} | {name}, {orow['spp']} spp | "
+                           f"{_md_number(ot, 3)} | {_md_number(oe)} | "
+                           f"{_md_number(e / oe, 3)} |")
+    return out
+
+
+def plot_denoise(rows, path, experiment: Experiment) -> None:
+    """Error (log) against relative time (log): a panel per scene, a curve per method.
+
+    MRT modes in colour (dashed: with ``denoise``), the full render black,
+    ``oidn`` grey (dashed: without guides; open markers: balanced quality);
+    the dotted lines are the full render's error and the equal-time limit.
+    """
+    from matplotlib.lines import Line2D
+
+    scenes = denoise_curves(rows)
+    n = max(len(scenes), 1)
+    cols = min(n, 5)
+    nrows = math.ceil(n / cols)
+    fig = _figure(3.2 * cols + 1.8, 2.9 * nrows)
+    axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
+    modes = list(dict.fromkeys(label.removesuffix(DENOISED_SUFFIX)
+                               for curves in scenes.values() for label in curves
+                               if _is_mrt(label)))
+    handles = {}
+    for ax, (group, curves) in zip(axes, scenes.items()):
+        e64, _ = _reference_error(curves)
+        for label, pts in curves.items():
+            if label == FULL:
+                style = dict(color="k", ls="-", marker="o")
+            elif label.split()[0] in (OIDN, OIDN_NOAUX):
+                method, quality = (label.split() + [""])[:2]
+                style = dict(color="0.55", ls="--" if method == OIDN_NOAUX else "-",
+                             marker="s", mfc="none" if quality == "balanced" else "0.55")
+            else:
+                k = modes.index(label.removesuffix(DENOISED_SUFFIX))
+                style = dict(color=f"C{k % 10}", marker="^",
+                             ls="--" if label.endswith(DENOISED_SUFFIX) else "-")
+            line, = ax.plot([p[0] for p in pts], [p[1] for p in pts], ms=3, lw=1.0, **style)
+            handles.setdefault(label, line)
+        if math.isfinite(e64):
+            ax.axhline(e64, color="k", ls=":", lw=0.8)
+        ax.axvline(EQUAL_TIME_UP_TO, color="r", ls=":", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        _plain_ticks(ax.xaxis), _plain_ticks(ax.yaxis)
+        ax.set_title(group, fontsize=8)
+        ax.tick_params(labelsize=6)
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes[len(scenes):]:
+        ax.set_visible(False)
+    for ax in axes[::cols]:
+        ax.set_ylabel("error vs converged", fontsize=7)
+    for ax in axes[-cols:]:
+        ax.set_xlabel("time / full render at top spp", fontsize=7)
+    extra = [Line2D([], [], color="k", ls=":", lw=0.8, label="full render's error"),
+             Line2D([], [], color="r", ls=":", lw=0.8,
+                    label=f"equal time up to {EQUAL_TIME_UP_TO:g}")]
+    fig.legend(handles=list(handles.values()) + extra,
+               labels=list(handles) + [h.get_label() for h in extra],
+               loc="center right", fontsize=6, frameon=False)
+    fig.suptitle(f"{experiment.name}: {experiment.title}; each curve: spp "
+                 f"{', '.join(str(s) for s in experiment.ladder)}", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1 - 1.6 / (3.2 * cols + 1.8), 1))
+    _save(fig, path)

@@ -5,7 +5,8 @@ measures its points one after the other (:mod:`.measure`), rewriting the
 CSV after every point so that a crash keeps what was measured, and then
 writes the plot, the triptych (or, for ``gallery``, a picture per scene)
 and the markdown tables (:mod:`.report`) into the output folder, each file
-atomically.
+atomically. ``denoise`` points are measured by :class:`.measure.DenoiseRunner`
+into their own CSV columns, plotted as error against time.
 """
 
 from __future__ import annotations
@@ -14,15 +15,16 @@ import os
 import shlex
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ..app.imageio import atomic_path
 from ..errors import MRTError
 from .experiments import EXPERIMENTS, build_experiment, resolve_methods
-from .measure import CONVERGED_FACTOR, MIN_TIMED_SECONDS, MemoryMeter, PointRunner
-from .report import (environment_line, markdown_tables, plot_sweep, plot_tradeoff,
-                     plot_triptych, read_csv, write_csv)
+from .measure import (CONVERGED_FACTOR, DENOISE_COLUMNS, MIN_TIMED_SECONDS, DenoiseRunner,
+                      MemoryMeter, PointRunner)
+from .report import (CSV_COLUMNS, environment_line, markdown_tables, plot_denoise, plot_sweep,
+                     plot_tradeoff, plot_triptych, read_csv, write_csv)
 
 #: The subfolder of the output folder that keeps converged references.
 CACHE_DIR = "cache"
@@ -139,7 +141,10 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     env = environment(variant)
     meter = MemoryMeter()
     started = time.perf_counter()
-    per_point = [(1 + len(p.settings) * (len(method_list) - 1)) * (repeats + 1) + 1
+    denoise = experiment.kind == "denoise"
+    runner_class = DenoiseRunner if denoise else PointRunner
+    columns = DENOISE_COLUMNS if denoise else CSV_COLUMNS
+    per_point = [runner_class.ticks(experiment, p, method_list, repeats)
                  for p in experiment.points]
     rows, images, pictures = [], None, []
     csv_path = out / f"{name}.csv"
@@ -148,13 +153,17 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     with _progress(sum(per_point), name, progress) as bar:
         for k, point in enumerate(experiment.points):
             bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px", refresh=False)
-            runner = PointRunner(experiment, point, method_list, repeats, scenes, meter, env,
+            runner = runner_class(experiment, point, method_list, repeats, scenes, meter, env,
                                  lambda: bar.update(1), 0.0 if quick else MIN_TIMED_SECONDS,
                                  cache_dir=cache)
             keep = 0 if experiment.pictures else (rep_setting if k == rep_point else None)
             point_rows, point_images = runner.run(keep)
             rows += point_rows
-            write_csv(csv_path, rows)  # after every point: a crash keeps what was measured
+            write_csv(csv_path, rows, columns)  # after every point: a crash keeps its rows
+            if denoise and k + 1 < len(experiment.points):  # its points take minutes each
+                _write_report(out, name, experiment, rows, command, env, repeats,
+                              time.perf_counter() - started,
+                              f"after {k + 1} of {len(experiment.points)} scenes")
             if experiment.pictures:
                 picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
                                    point_images, point, experiment.pictures)
@@ -163,25 +172,39 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
                 images = (point_images, point, point.settings[rep_setting])
     seconds = time.perf_counter() - started
 
-    text_rows = read_csv(csv_path)
-    png = None
-    if experiment.kind != "gallery":
-        png = out / f"{name}.png"
-        (plot_tradeoff if experiment.kind == "tradeoff" else plot_sweep)(text_rows, png,
-                                                                         experiment)
+    text_rows, png, md = _write_report(out, name, experiment, rows, command, env, repeats,
+                                       seconds)
     triptych = None
     if images is not None:
         triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
+    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
 
+
+def _write_report(out: Path, name: str, experiment, rows, command: str, env: dict,
+                  repeats: int, seconds: float, partial: str = ""):
+    """The plot and the markdown of ``rows`` (the CSV's, as written): (text rows, png, md).
+
+    ``partial``: how far a run still going has come (said in the markdown).
+    """
+    text_rows = read_csv(out / f"{name}.csv")
+    png = None
+    if experiment.kind != "gallery":
+        png = out / f"{name}.png"
+        plot = {"tradeoff": plot_tradeoff, "denoise": plot_denoise}.get(experiment.kind,
+                                                                         plot_sweep)
+        plot(text_rows, png, experiment)
+    # for denoise, the markdown also says what its CSV leaves out: samplers, stage, failures
+    md_rows = [asdict(r) for r in rows] if experiment.kind == "denoise" else text_rows
     md = out / f"{name}.md"
     text = (f"Command: `{command}`\n\n"
             f"Environment: {environment_line(env)}; repeats {repeats}, more where the full "
             f"render is fast (lower median); "
-            f"wall time of the whole experiment {seconds:.0f} s.\n\n"
-            + markdown_tables(text_rows, experiment))
+            + (f"written {partial}, {seconds:.0f} s in.\n\n" if partial else
+               f"wall time of the whole experiment {seconds:.0f} s.\n\n")
+            + markdown_tables(md_rows, experiment))
     with atomic_path(md) as tmp:
         Path(tmp).write_text(text)
-    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
+    return text_rows, png, md
 
 
 def _triptych(path, rows, images, point, setting):
