@@ -15,6 +15,8 @@ fails records its one-line error and the others go on.
 The pure pieces (:func:`parse_values`, :class:`Sweep`, :func:`plan_tasks`,
 :func:`run_task`, :func:`write_table`) need no Dask; :func:`run_batch`,
 the driver, imports ``dask.distributed`` (the ``batch`` extra).
+:func:`cluster_map` lends the same cluster to another command's tasks:
+``bench --workers/--scheduler`` measures its points on it.
 """
 
 from __future__ import annotations
@@ -40,8 +42,8 @@ from .imageio import atomic_path
 TABLE_NAME = "batch.csv"
 #: Most tasks one batch may plan (a typo in a range should not plan millions).
 MAX_TASKS = 100_000
-#: The one-line error without the extra installed.
-DASK_MISSING = "the batch command needs Dask: pip install mitsuba-mrt[batch]"
+#: The one-line error without the extra installed (``{command}``: batch, bench).
+DASK_MISSING = "the {command} command needs Dask: pip install mitsuba-mrt[batch]"
 #: How often a task is resubmitted after the cluster cancelled it (a restart).
 RESUBMITS = 2
 #: Frame time of the animations, milliseconds.
@@ -476,12 +478,23 @@ class BatchResult:
         return self.count("failed")
 
 
-def _require_dask():
+def _require_dask(command: str = "batch"):
     try:
         import distributed
     except ImportError:
-        raise MRTError(DASK_MISSING) from None
+        raise MRTError(DASK_MISSING.format(command=command)) from None
     return distributed
+
+
+def check_cluster_options(scheduler: str | None, workers: int | None,
+                          command: str = "batch") -> None:
+    """Dask is installed, and ``--scheduler``/``--workers`` make sense (one-line MRTError)."""
+    _require_dask(command)
+    if workers is not None and workers < 1:
+        raise MRTError(f"--workers must be >= 1, got {workers}")
+    if workers is not None and scheduler:
+        raise MRTError("--workers sizes the local cluster; with --scheduler the "
+                       "cluster's own workers run the tasks")
 
 
 def _cores() -> int:
@@ -588,12 +601,7 @@ def run_batch(scenes, out_dir, defines=(), *, scheduler: str | None = None,
     tasks not yet done and still writes the table (status ``pending`` for
     those).
     """
-    _require_dask()
-    if workers is not None and workers < 1:
-        raise MRTError(f"--workers must be >= 1, got {workers}")
-    if workers is not None and scheduler:
-        raise MRTError("--workers sizes the local cluster; with --scheduler the "
-                       "cluster's own workers run the tasks")
+    check_cluster_options(scheduler, workers)
     tasks = plan_tasks(scenes, Sweep.parse(defines), job_options)
     out = Path(out_dir)
     try:
@@ -673,3 +681,47 @@ def _run_on_cluster(todo, out: Path, rows: dict, scheduler, workers, progress, e
             bar.close()
             if futures:
                 client.cancel(list(futures))
+
+
+# -- other commands' tasks on the same cluster ----------------------------------------------
+
+
+def _call_on_worker(fn, args: tuple, jit_threads):
+    """``fn(*args)`` on a worker, in a process tuned and with Dr.Jit's threads set as
+    :func:`run_task` does; ``fn`` activates its own variant."""
+    from ..runtime import configure
+
+    configure()
+    _set_jit_threads(jit_threads)
+    return fn(*args)
+
+
+@contextmanager
+def cluster_map(scheduler: str | None = None, workers: int | None = None, echo=print,
+                command: str = "bench"):
+    """A Dask cluster for another command's tasks (``bench``: one per point).
+
+    The cluster is that of :func:`run_batch` (``scheduler``, or a LocalCluster
+    of ``workers`` processes); yields ``map_calls(fn, calls)``, which submits
+    ``fn(*call)`` for every tuple of ``calls`` (``fn`` importable on the
+    workers) and yields ``(index, result)`` as each finishes.  A call that
+    raises, once its retries are spent, raises here; the others are cancelled.
+    """
+    check_cluster_options(scheduler, workers, command)
+
+    def map_calls(fn, calls):
+        from distributed import as_completed
+
+        tag = uuid.uuid4().hex[:8]
+        futures = {client.submit(_call_on_worker, fn, tuple(call), jit_threads,
+                                 key=f"{command}-{k}-{tag}", retries=2, pure=False): k
+                   for k, call in enumerate(calls)}
+        try:
+            for future in as_completed(list(futures), loop=client.loop):
+                yield futures.pop(future), future.result()
+        finally:
+            if futures:
+                client.cancel(list(futures))
+
+    with _client(scheduler, workers, echo) as (client, jit_threads):
+        yield map_calls

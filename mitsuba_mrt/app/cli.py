@@ -7,6 +7,7 @@ The commands own their process, so they opt into the process tuning of
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import warnings
@@ -142,6 +143,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 200, tradeoff 400, gallery 128; --quick 64, gallery 32)")
     b.add_argument("--scenes", default=None, metavar="DIR",
                    help="folder of the report's scenes (default: the repository's scenes_xml)")
+    b.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="measure the points on the Dask cluster of this scheduler "
+                        "(tcp://host:8786), a point's methods all on one worker "
+                        "(needs the batch extra); default: in this process")
+    b.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="measure the points on a local Dask cluster of N worker processes")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
@@ -198,10 +205,18 @@ def _bench(args) -> int:
     from ..bench import run_experiment, summary_line
 
     command = "python -m mitsuba_mrt " + shlex.join(args.argv)
-    results = run_experiment(args.experiment, args.output, quick=args.quick,
-                             repeats=args.repeats, variant=args.variant, methods=args.methods,
-                             res=args.res, scenes_dir=args.scenes,
-                             progress=not args.no_progress, command=command)
+    with contextlib.ExitStack() as stack:
+        map_points = None
+        if args.scheduler or args.workers is not None:
+            from .batch import cluster_map
+
+            map_points = stack.enter_context(cluster_map(
+                args.scheduler, args.workers, lambda line: print(line, file=sys.stderr)))
+        results = run_experiment(args.experiment, args.output, quick=args.quick,
+                                 repeats=args.repeats, variant=args.variant,
+                                 methods=args.methods, res=args.res, scenes_dir=args.scenes,
+                                 progress=not args.no_progress, command=command,
+                                 map_points=map_points)
     for name, result in results.items():
         print(summary_line(name, result))
     return 0

@@ -7,6 +7,12 @@ writes the plot, the triptych (or, for ``gallery``, a picture per scene)
 and the markdown tables (:mod:`.report`) into the output folder, each file
 atomically. ``denoise`` points are measured by :class:`.measure.DenoiseRunner`
 into their own CSV columns, plotted as error against time.
+
+Given ``map_points`` (the ``bench`` command's ``--scheduler``/``--workers``:
+:func:`mitsuba_mrt.app.batch.cluster_map`), the points are measured
+elsewhere, one call of :func:`measure_point` each, all methods of a point in
+one process as in the serial run; the rows and pictures are written here, in
+the points' order, as the serial run writes them.
 """
 
 from __future__ import annotations
@@ -72,7 +78,7 @@ def _progress(total: int, desc: str, enabled: bool):
 def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
                    repeats: int | None = None, variant: str = "auto", methods=None,
                    res: int | None = None, scenes_dir=None, progress: bool = True,
-                   command: str | None = None) -> dict:
+                   command: str | None = None, map_points=None) -> dict:
     """Run experiment ``name`` (or ``all``) and write its outputs into ``out_dir``.
 
     Parameters
@@ -98,6 +104,11 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
         Show a progress bar on stderr.
     command : str, optional
         The command line written at the top of the markdown table.
+    map_points : callable, optional
+        ``map_points(fn, calls)`` runs ``fn(*call)`` for every tuple of
+        ``calls`` (elsewhere: a Dask cluster) and yields ``(index, result)``
+        as each finishes; each point is then one :func:`measure_point` call.
+        Default: every point in this process, one after the other.
 
     Returns
     -------
@@ -111,7 +122,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
                                       variant=variant, methods=methods,
                                       res=None if exp == "pixels" else res,
                                       scenes_dir=scenes_dir, progress=progress,
-                                      command=command))
+                                      command=command, map_points=map_points))
         return out
     if repeats is None:
         repeats = 1 if quick else 3
@@ -150,26 +161,49 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     csv_path = out / f"{name}.csv"
     rep_point, rep_setting = experiment.representative
     cache = out / CACHE_DIR if experiment.cache_converged else None
+    min_seconds = 0.0 if quick else MIN_TIMED_SECONDS
+
+    def keep(k):
+        return 0 if experiment.pictures else (rep_setting if k == rep_point else None)
+
+    def take(k, point_rows, point_images):
+        """Point ``k``'s rows and images into the CSV and pictures (points in order)."""
+        nonlocal images
+        point = experiment.points[k]
+        rows.extend(point_rows)
+        write_csv(csv_path, rows, columns)  # after every point: a crash keeps its rows
+        if denoise and k + 1 < len(experiment.points):  # its points take minutes each
+            _write_report(out, name, experiment, rows, command, env, repeats,
+                          time.perf_counter() - started,
+                          f"after {k + 1} of {len(experiment.points)} scenes")
+        if experiment.pictures:
+            picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
+                               point_images, point, experiment.pictures)
+            pictures.extend([picture] if picture else [])
+        elif point_images is not None:
+            images = (point_images, point, point.settings[rep_setting])
+
     with _progress(sum(per_point), name, progress) as bar:
-        for k, point in enumerate(experiment.points):
-            bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px", refresh=False)
-            runner = runner_class(experiment, point, method_list, repeats, scenes, meter, env,
-                                 lambda: bar.update(1), 0.0 if quick else MIN_TIMED_SECONDS,
-                                 cache_dir=cache)
-            keep = 0 if experiment.pictures else (rep_setting if k == rep_point else None)
-            point_rows, point_images = runner.run(keep)
-            rows += point_rows
-            write_csv(csv_path, rows, columns)  # after every point: a crash keeps its rows
-            if denoise and k + 1 < len(experiment.points):  # its points take minutes each
-                _write_report(out, name, experiment, rows, command, env, repeats,
-                              time.perf_counter() - started,
-                              f"after {k + 1} of {len(experiment.points)} scenes")
-            if experiment.pictures:
-                picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
-                                   point_images, point, experiment.pictures)
-                pictures += [picture] if picture else []
-            elif point_images is not None:
-                images = (point_images, point, point.settings[rep_setting])
+        if map_points is None:
+            for k, point in enumerate(experiment.points):
+                bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px",
+                                    refresh=False)
+                runner = runner_class(experiment, point, method_list, repeats, scenes, meter,
+                                      env, lambda: bar.update(1), min_seconds,
+                                      cache_dir=cache)
+                take(k, *runner.run(keep(k)))
+        else:
+            # the workers read the scenes and keep the cache at these paths
+            calls = [(experiment, k, method_list, repeats, scenes.resolve(), variant,
+                      min_seconds, cache and cache.resolve(), keep(k))
+                     for k in range(len(experiment.points))]
+            done, next_k = {}, 0
+            for k, result in map_points(measure_point, calls):
+                bar.update(per_point[k])
+                done[k] = result
+                while next_k in done:
+                    take(next_k, *done.pop(next_k))
+                    next_k += 1
     seconds = time.perf_counter() - started
 
     text_rows, png, md = _write_report(out, name, experiment, rows, command, env, repeats,
@@ -178,6 +212,29 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
     if images is not None:
         triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
     return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
+
+
+def measure_point(experiment, k: int, methods: list, repeats: int, scenes_dir: Path,
+                  variant: str, min_seconds: float, cache_dir: Path | None,
+                  keep_images_for: int | None) -> tuple:
+    """Point ``k`` of ``experiment``, measured where it is called (a Dask worker).
+
+    Activates ``variant`` in this process and measures every method of the
+    point here, alternating, as the serial run does; returns the runner's
+    ``(rows, images)``, the rows' environment that of this process.
+    """
+    from ..renderer.variants import activate, environment
+
+    variant = activate(variant)
+    runner_class = DenoiseRunner if experiment.kind == "denoise" else PointRunner
+    runner = runner_class(experiment, experiment.points[k], methods, repeats, scenes_dir,
+                          MemoryMeter(), environment(variant), _no_tick, min_seconds,
+                          cache_dir=cache_dir)
+    return runner.run(keep_images_for)
+
+
+def _no_tick():
+    """A worker has no progress bar: the client counts finished points."""
 
 
 def _write_report(out: Path, name: str, experiment, rows, command: str, env: dict,

@@ -1,6 +1,7 @@
 """``bench``: a quick experiment end to end, the method names, the plots (headless), errors."""
 
 import math
+import sys
 
 import pytest
 
@@ -240,3 +241,39 @@ def test_quick_gallery_has_every_method_and_reuses_the_converged_reference(tmp_p
     assert {r["method"] for r in rerun} == {"full", "bicubic", "full-equal-time"}
     assert all(math.isfinite(float(r["error_converged"])) for r in rerun)
     assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "cache").iterdir()} == cached
+
+
+#: Columns that depend on timing (or on the process's memory), not on what was computed.
+TIMED = {"repeats", "trace_s", "edges_s", "interpolate_s", "total_s", "total_min_s",
+         "total_max_s", "warmup_s", "reference_s", "relative_time", "matched_method",
+         "peak_memory_mb", "memory_delta_mb"}
+
+
+def test_points_on_a_local_cluster_give_the_serial_rows(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    import time
+
+    argv = ["bench", "objects", "--quick", "--res", "16", "--scenes", str(SCENES),
+            "--no-progress"]
+    start = time.perf_counter()
+    assert main([*argv, "-o", str(tmp_path / "serial")]) == 0
+    assert main([*argv, "-o", str(tmp_path / "dask"), "--workers", "2"]) == 0
+    seconds = time.perf_counter() - start
+    assert "dask: local cluster of 2 worker processes" in capsys.readouterr().err
+    serial = report.read_csv(tmp_path / "serial" / "objects.csv")
+    spread = report.read_csv(tmp_path / "dask" / "objects.csv")
+    assert [r["method"] for r in spread] == [r["method"] for r in serial]
+    for a, b in zip(serial, spread):
+        assert {k: v for k, v in a.items() if k not in TIMED} == \
+            {k: v for k, v in b.items() if k not in TIMED}
+    assert {r["status"] for r in spread} == {"ok"}
+    for name in ("objects.png", "objects_triptych.png", "objects.md"):
+        assert (tmp_path / "dask" / name).is_file()
+    assert seconds < 40
+
+
+def test_bench_on_a_cluster_without_dask_is_one_line(monkeypatch, capsys, tmp_path):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # its import fails
+    assert main(["bench", "objects", "--quick", "--workers", "2", "-o", str(tmp_path)]) == 2
+    assert capsys.readouterr().err == ("error: the bench command needs Dask: "
+                                       "pip install mitsuba-mrt[batch]\n")
