@@ -128,7 +128,7 @@ def _fill_agreeing(ids, r0, r1, c0, c1, value):
 
 
 #: Most pixels traced for shading the grid cannot follow, as a share of all pixels.
-ROUGH_BUDGET = 0.15
+ROUGH_BUDGET = 0.3
 #: A second difference is rough beyond this many standard deviations of its noise...
 ROUGH_NOISE = 4.0
 #: ... and beyond this share of the magnitude of the samples it is taken over.

@@ -95,4 +95,4 @@ def test_refine_traces_cells_whose_shading_the_grid_cannot_follow():
     assert out.stats["rough_cells"] > 0
     assert out.traced_mask[12:20, 20:23].all()
     assert np.allclose(out.image[12:20, 20:23], 5.0)
-    assert out.stats["refined_pixels"] <= 0.15 * height * width  # ROUGH_BUDGET
+    assert out.stats["refined_pixels"] <= 0.3 * height * width  # ROUGH_BUDGET
