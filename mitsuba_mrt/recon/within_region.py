@@ -454,9 +454,10 @@ class GridValues:
         values = self.unscaled(values)
         return values if values.shape[-1] == 3 else values[:, :3] * values[:, 3:]
 
-    def radiance(self, interpolated: np.ndarray) -> np.ndarray:
+    def radiance(self, interpolated: np.ndarray, parallel: bool = True) -> np.ndarray:
         """float64 radiance (height, width, 3) of interpolated scaled radiance
-        (C = 3), or irradiance and albedo (C = 6), in row blocks on all cores."""
+        (C = 3), or irradiance and albedo (C = 6); in row blocks on all cores
+        with ``parallel`` (not from a task of the pool itself)."""
         height, width, channels = interpolated.shape
         out = np.empty((height, width, 3))
         # the scales tiled along a row: numpy broadcasts a (3,) operand slowly
@@ -473,7 +474,10 @@ class GridValues:
                             dtype=np.float64)
                 flat *= tiled
 
-        for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
+        if parallel:
+            for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
+        else:
+            rows(0, height)
         return out
 
 
@@ -537,7 +541,8 @@ def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.n
     grid = GridValues.from_samples(pattern, grid_ids, values)
     counts["fireflies"] = grid.fireflies
     early = early_values(pattern, grid_ids, grid.values)
-    return grid, constant, counts, early, grid.radiance(early.image)
+    # on the pool's worker already (beside the ids): no nested row blocks
+    return grid, constant, counts, early, grid.radiance(early.image, parallel=False)
 
 
 def interpolate_traced_grid(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
