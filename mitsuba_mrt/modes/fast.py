@@ -2,11 +2,12 @@
 
 Every pixel takes the id of its nearest traced pixel (nearest row and
 nearest column, chosen independently), then the report's Gaussian smoothing
-(``filter_sigma``, ``filter_cutoff``) softens the boundaries, in its
-order-free form (:func:`mitsuba_mrt.recon.edges.smooth_ids_by_score`: the
-result does not depend on how the ids are numbered), and the traced pixels
-keep their traced ids; values come from
-:mod:`mitsuba_mrt.recon.within_region`.  Nothing is traced beyond the grid.
+(``filter_sigma``, ``filter_cutoff``) softens the boundaries, dilating the
+ids in an order their samples decide (most samples first,
+:func:`mitsuba_mrt.recon.edges.geometric_order`) rather than by number, so
+that renumbering the shapes changes nothing; the traced pixels keep their
+traced ids.  Values come from :mod:`mitsuba_mrt.recon.within_region`.
+Nothing is traced beyond the grid.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..recon.edges import region_boxes, smooth_ids_by_score
+from ..recon.edges import geometric_order, region_boxes, smooth_ids
 from ..recon.ids import rank_ids
 from ..recon.sampling import SamplePattern
 from ..recon.within_region import TracedGridValues
@@ -58,8 +59,8 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     if stats["regions"] == 1:
         skips.edge_finding += 1
     else:
-        rank_map = smooth_ids_by_score(rank_map, params.filter_sigma, params.filter_cutoff,
-                                       background, boxes)
+        rank_map = smooth_ids(rank_map, params.filter_sigma, params.filter_cutoff,
+                              background, boxes, order=geometric_order(sample_ranks))
         pattern.put_traced(rank_map, sample_ranks)  # a traced pixel's id is known
     timings.edges = time.perf_counter() - start
 

@@ -258,7 +258,7 @@ def id_boxes(ids: np.ndarray) -> dict:
 
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
                filter_cutoff: float = 0.05, background: int = 0,
-               boxes: dict | None = None) -> np.ndarray:
+               boxes: dict | None = None, order=None) -> np.ndarray:
     """Soften the quadtree's jagged edges (report Algorithm 2, 8-13).
 
     For every id except ``background``, in increasing order, the 0/1 mask of
@@ -267,6 +267,11 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
     ``filter_cutoff`` is given that id.  The blur runs only on the id's
     bounding box grown by the filter's reach (4 sigma), which gives the
     same result as blurring the whole image.
+
+    A later id grows over an earlier one, so the result depends on the
+    order: ``order`` (the ids, in the order to dilate them) replaces the
+    report's increasing order, e.g. by one that the geometry decides
+    (:func:`geometric_order`), so that renumbering the ids changes nothing.
 
     Parameters
     ----------
@@ -304,7 +309,10 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
     reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation
     weights = gaussian_weights(filter_sigma, reach)
     height, width = out.shape
-    values = sorted(boxes) if boxes is not None else np.unique(out).tolist()
+    if order is not None:
+        values = [int(v) for v in order]
+    else:
+        values = sorted(boxes) if boxes is not None else np.unique(out).tolist()
     for value in values:
         if value == background:
             continue
@@ -327,76 +335,29 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
     return out
 
 
-def smooth_ids_by_score(ids: np.ndarray, filter_sigma: float = 1.0,
-                        filter_cutoff: float = 0.05, background: int = 0,
-                        boxes: dict | None = None) -> np.ndarray:
-    """The smoothing of :func:`smooth_ids`, independent of the ids' order.
+def geometric_order(sample_ids: np.ndarray) -> np.ndarray:
+    """The distinct ids, most samples first, ties by their first sample.
 
-    Every id except ``background`` is blurred as there, but always from its
-    pixels in ``ids`` (not from what earlier ids left of them), divided by
-    its peak: its *score*.  A pixel goes to the id with the highest score
-    above ``filter_cutoff``, keeping its own id on a tie; where no id
-    scores above the cutoff it keeps its id, and ``background`` never takes
-    a pixel.  So ids still grow into the background, while the boundary
-    between two ids is smoothed where the two score alike, whichever id is
-    the larger number (:func:`smooth_ids` lets the larger id grow over the
-    smaller).  A tie between two ids that are neither the pixel's own
-    (exactly equal blurs) goes to the one that comes first in the sorted
-    ids.
-
-    Parameters and result as :func:`smooth_ids`.
+    An order for :func:`smooth_ids` that the samples' layout decides, not
+    the ids' numbers: the largest regions are dilated first, so the small
+    ones, dilated last, are not swallowed by their neighbours.
 
     Examples
     --------
-    >>> ids = np.zeros((1, 9), dtype=int); ids[0, 4:] = 2; ids[0, :4] = 1
-    >>> smooth_ids_by_score(ids, 1.0, 0.05).tolist() == ids.tolist()  # a straight edge stays
-    True
+    >>> geometric_order(np.array([7, 3, 3, 9, 9, 9, 5, 7])).tolist()
+    [9, 7, 3, 5]
     """
-    filter_sigma = float(filter_sigma)
-    filter_cutoff = float(filter_cutoff)
-    if not filter_sigma >= 0.0 or not np.isfinite(filter_sigma):
-        raise MRTError(f"filter_sigma must be a finite number >= 0, got {filter_sigma}")
-    if not 0.0 <= filter_cutoff <= 1.0:
-        raise MRTError(f"filter_cutoff must be in [0, 1], got {filter_cutoff}")
-    ids = np.asarray(ids)
-    if ids.dtype.kind not in "iu":
-        ids = ids.astype(np.int64)
-    out = ids.copy()
-    if filter_sigma == 0.0:
-        return out
-    reach = int(4.0 * filter_sigma + 0.5)  # scipy's default truncation
-    weights = gaussian_weights(filter_sigma, reach)
-    height, width = out.shape
-    # score of each pixel's id so far; starting at the cutoff, "above the
-    # cutoff and above the others" is one comparison (an own id tying with
-    # the cutoff takes its own pixel back from nobody: no change)
-    best = np.full(out.shape, filter_cutoff, dtype=np.float32)
-    values = sorted(boxes) if boxes is not None else np.unique(ids).tolist()
-    for value in values:
-        if value == background:
-            continue
-        b0, b1, d0, d1 = boxes[value] if boxes is not None else (0, height, 0, width)
-        g0, g1 = max(b0 - reach, 0), min(b1 + reach, height)
-        h0, h1 = max(d0 - reach, 0), min(d1 + reach, width)
-        mask = ids[g0:g1, h0:h1] == value
-        rr = np.flatnonzero(mask.any(axis=1))
-        if len(rr) == 0:
-            continue
-        cc = np.flatnonzero(mask.any(axis=0))
-        r0, r1 = max(g0 + rr[0] - reach, 0), min(g0 + rr[-1] + reach + 1, height)
-        c0, c1 = max(h0 + cc[0] - reach, 0), min(h0 + cc[-1] + reach + 1, width)
-        blurred = _blurred_mask(mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0], weights)
-        peak = blurred.max()
-        if not peak > 0.0:
-            continue
-        score = np.divide(blurred, peak, out=blurred)
-        so_far = best[r0:r1, c0:c1]
-        take = score > so_far
-        own = mask[r0 - g0:r1 - g0, c0 - h0:c1 - h0]
-        take |= own & (score == so_far)  # ties go to the pixel's own id
-        np.copyto(out[r0:r1, c0:c1], value, where=take)
-        np.copyto(so_far, score, where=take)
-    return out
+    sample_ids = np.asarray(sample_ids).ravel()
+    if sample_ids.dtype.kind in "iu" and sample_ids.min() >= 0 and sample_ids.max() < 1 << 20:
+        # small non-negative ids (ranks): counts and first samples without a sort
+        counts = np.bincount(sample_ids)
+        first = np.full(len(counts), len(sample_ids))
+        first[sample_ids[::-1]] = np.arange(len(sample_ids) - 1, -1, -1)  # the last write wins
+        labels = np.flatnonzero(counts)
+        counts, first = counts[labels], first[labels]
+    else:
+        labels, first, counts = np.unique(sample_ids, return_index=True, return_counts=True)
+    return labels[np.lexsort((first, -counts))]
 
 
 def least_above(cutoff: float, peak: np.float32) -> np.float32:

@@ -353,7 +353,9 @@ def early_values(pattern: SamplePattern, grid_ids: np.ndarray,
         cx, _ = cell_coordinates(pattern.cols, pattern.width)
         lo, hi = lo.take(cx, axis=1), hi.take(cx, axis=1)  # (nr, width, C)
         for start, stop, i in cell_row_runs(cy):  # the rows of one grid cell share a range
-            np.clip(image[start:stop], lo[i], hi[i], out=image[start:stop])
+            rows = image[start:stop]  # (minimum and maximum: np.clip is several times slower)
+            np.minimum(rows, hi[i], out=rows)
+            np.maximum(rows, lo[i], out=rows)
     return EarlyValues(image, stencil_ids)
 
 
@@ -385,18 +387,30 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
     if early is None:
         early = early_values(pattern, grid_ids, grid_values)
     out = np.ascontiguousarray(early.image)  # (it is already: no copy)
-    pixels = out.reshape(-1, out.shape[2])  # a view, written through
-    slow = early.stencil_ids != id_map
+    index, values, fitted = near_edge_values(pattern, grid_ids, grid_values, id_map,
+                                             constant, early)
+    out.reshape(-1, out.shape[2])[index] = values  # a view, written through
+    return out, fitted
+
+
+def near_edge_values(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np.ndarray,
+                     id_map: np.ndarray, constant: dict | None,
+                     early: EarlyValues) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pixels whose cubic stencil is not all of their id: flat indices,
+    values (m, C) and how many were fitted (the others are of a constant id)."""
+    index = np.flatnonzero(early.stencil_ids != id_map)  # flat: cheaper than 2-D
+    own = id_map.ravel()[index]
+    values = np.empty((len(index), grid_values.shape[2]), dtype=grid_values.dtype)
+    fit = np.ones(len(index), dtype=bool)
     for value, fill in (constant or {}).items():
-        near_edge = slow & (id_map == value)
-        pixels[np.flatnonzero(near_edge)] = fill
-        slow &= ~near_edge
-    index = np.flatnonzero(slow)  # flat indices: cheaper than 2-D nonzero and scatter
-    if len(index):
-        py, px = np.divmod(index, pattern.width)
-        pixels[index] = local_poly_fit(pattern, grid_ids, grid_values, py, px,
-                                       id_map.ravel()[index])
-    return out, len(index)
+        filled = own == value
+        values[filled] = fill
+        fit &= ~filled
+    fit = np.flatnonzero(fit)
+    if len(fit):
+        py, px = np.divmod(index[fit], pattern.width)
+        values[fit] = local_poly_fit(pattern, grid_ids, grid_values, py, px, own[fit])
+    return index, values, len(fit)
 
 
 #: Images of at least this many pixels are scaled back in row blocks on all cores.
@@ -424,7 +438,10 @@ class GridValues:
         """From per-sample values (count, C), any finite magnitude."""
         values = np.asarray(values, dtype=np.float64)
         scale = power_of_two_scale(values)
-        grid = (values / scale).astype(np.float32).reshape(pattern.grid_shape + (-1,))
+        grid = np.empty(values.shape, dtype=np.float32)
+        for c in range(values.shape[1]):  # exact: 1 / scale is a power of two too
+            np.multiply(values[:, c], 1.0 / scale[c], out=grid[:, c], casting="same_kind")
+        grid = grid.reshape(pattern.grid_shape + (-1,))
         grid, fireflies = suppress_fireflies(grid_ids, grid)
         return cls(grid, scale, fireflies)
 
@@ -432,9 +449,15 @@ class GridValues:
         """float64 values (..., C) of interpolated scaled values."""
         return interpolated * self.scale  # float32 times float64: float64
 
-    def radiance(self, interpolated: np.ndarray) -> np.ndarray:
+    def radiance_of(self, values: np.ndarray) -> np.ndarray:
+        """float64 radiance (m, 3) of scaled values (m, C), as :meth:`radiance`."""
+        values = self.unscaled(values)
+        return values if values.shape[-1] == 3 else values[:, :3] * values[:, 3:]
+
+    def radiance(self, interpolated: np.ndarray, parallel: bool = True) -> np.ndarray:
         """float64 radiance (height, width, 3) of interpolated scaled radiance
-        (C = 3), or irradiance and albedo (C = 6), in row blocks on all cores."""
+        (C = 3), or irradiance and albedo (C = 6); in row blocks on all cores
+        with ``parallel`` (not from a task of the pool itself)."""
         height, width, channels = interpolated.shape
         out = np.empty((height, width, 3))
         # the scales tiled along a row: numpy broadcasts a (3,) operand slowly
@@ -451,7 +474,10 @@ class GridValues:
                             dtype=np.float64)
                 flat *= tiled
 
-        for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
+        if parallel:
+            for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
+        else:
+            rows(0, height)
         return out
 
 
@@ -461,8 +487,9 @@ class TracedGridValues:
 
     :meth:`start` launches, on a worker thread, all that needs no final
     pixel ids (choosing the values to interpolate, then
-    :func:`early_values` on them), so a caller can find the ids meanwhile;
-    :meth:`finish` takes them and fits the pixels near edges.
+    :func:`early_values` on them and their float64 radiance), so a caller
+    can find the ids meanwhile; :meth:`finish` takes them and fits the
+    pixels near edges.
     Radiance is interpolated directly when albedo is constant within every
     id; otherwise irradiance (radiance / albedo) and albedo are, with the
     same weights, and multiplied back.  A black background is filled, and
@@ -487,10 +514,11 @@ class TracedGridValues:
         its own id, and counts: ``albedo_division`` and ``background``
         (shortcuts taken), ``edge_pixels`` (pixels fitted near edges),
         ``fireflies`` (samples kept out of the interpolation)."""
-        grid, constant, counts, early = self.early.result()
-        interp, edge_pixels = interpolate_within_ids(
+        grid, constant, counts, early, image = self.early.result()
+        # the cubic's radiance was made beside the ids; the pixels near edges go in
+        index, values, edge_pixels = near_edge_values(
             self.pattern, self.grid_ids, grid.values, id_map, constant, early)
-        image = grid.radiance(interp)
+        image.reshape(-1, 3)[index] = grid.radiance_of(values)
         self.pattern.put_traced(image, self.radiance)
         counts["edge_pixels"] = int(edge_pixels)
         return image, counts
@@ -499,8 +527,8 @@ class TracedGridValues:
 def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
                       sample_ids: np.ndarray, background: int = 0):
     """The grid values to interpolate (:class:`GridValues` of radiance, or of
-    irradiance and albedo), the constant ids, the shortcut counts, and
-    :func:`early_values` of those values."""
+    irradiance and albedo), the constant ids, the shortcut counts,
+    :func:`early_values` of those values, and its radiance (float64)."""
     counts = Counter()
     albedo = safe_albedo(albedo)
     constant = black_background(sample_ids, radiance, counts, background)
@@ -512,7 +540,9 @@ def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.n
     grid_ids = sample_ids.reshape(pattern.grid_shape)
     grid = GridValues.from_samples(pattern, grid_ids, values)
     counts["fireflies"] = grid.fireflies
-    return grid, constant, counts, early_values(pattern, grid_ids, grid.values)
+    early = early_values(pattern, grid_ids, grid.values)
+    # on the pool's worker already (beside the ids): no nested row blocks
+    return grid, constant, counts, early, grid.radiance(early.image, parallel=False)
 
 
 def interpolate_traced_grid(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,

@@ -256,8 +256,7 @@ def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, m
             return function(*args, **kwargs)
         return wrapped
 
-    monkeypatch.setattr(fast_mode, "smooth_ids_by_score",
-                        spy("smoothing", fast_mode.smooth_ids_by_score))
+    monkeypatch.setattr(fast_mode, "smooth_ids", spy("smoothing", fast_mode.smooth_ids))
     monkeypatch.setattr(fast_jit, "_quadric_values", spy("fits", fast_jit._quadric_values))
     p = grid_pattern(48, 40, 0.15)
     shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)

@@ -22,7 +22,7 @@ from .stress_support import (ALBEDOS, CONSTANT_ALBEDOS, MODES, VALUES, Case, bou
 #: Mode paper keeps the report's Algorithm 2, whose smoothing dilates the ids
 #: one after the other in increasing order: a larger id grows over a smaller
 #: one, traced pixels included, so the result depends on the numbering.  Mode
-#: fast smooths the same way, order-free, and keeps traced ids.
+#: fast dilates them in an order the samples decide and keeps traced ids.
 PAPER_ALGORITHM_2 = ("mode paper keeps the report's Algorithm 2: its smoothing dilates "
                      "the ids in increasing order, over traced pixels and by number")
 
