@@ -15,6 +15,12 @@ sparse products:
 Radiance is interpolated directly when the albedo is constant within every
 id (then demodulating by albedo changes nothing); otherwise irradiance
 (radiance / albedo) and albedo are interpolated with the same weights.
+
+The values are divided by a power of two per channel before the float32
+work (:class:`GridValues`), fireflies are kept out of it, and every pixel
+is clamped to the range of its id's samples in its 4 x 4 grid block
+(:mod:`mitsuba_mrt.recon.bounds`); the image comes back in float64, with
+the traced radiance exactly.
 """
 
 from __future__ import annotations
@@ -189,7 +195,7 @@ def nearest_of_same_id(pattern: SamplePattern, grid_ids: np.ndarray, grid_values
     ...                    np.array([1, 1]))[:, 0].tolist()
     [0.0, 6.0]
     """
-    nr, nc = grid_ids.shape
+    nc = grid_ids.shape[1]
     flat_ids = grid_ids.ravel()
     wanted = np.unique(own)
     samples = np.flatnonzero(np.isin(flat_ids, wanted))
