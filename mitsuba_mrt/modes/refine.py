@@ -61,10 +61,13 @@ def refine_edges(pattern: SamplePattern, grid_ids: np.ndarray, trace_ids,
     if grid_split is not None and grid_split.any():
         split = np.zeros((pattern.height, pattern.width), dtype=bool)
         split[np.ix_(pattern.rows, pattern.cols)] = grid_split
-    r0 = np.repeat(pattern.rows[:-1], len(pattern.cols) - 1)
-    r1 = np.repeat(pattern.rows[1:], len(pattern.cols) - 1)
-    c0 = np.tile(pattern.cols[:-1], len(pattern.rows) - 1)
-    c1 = np.tile(pattern.cols[1:], len(pattern.rows) - 1)
+    # cells between consecutive grid lines; a grid of one row (column) has cells
+    # of no height (width) along it
+    rows, cols = pattern.rows, pattern.cols
+    lo_r, hi_r = (rows[:-1], rows[1:]) if len(rows) > 1 else (rows, rows)
+    lo_c, hi_c = (cols[:-1], cols[1:]) if len(cols) > 1 else (cols, cols)
+    r0, r1 = np.repeat(lo_r, len(lo_c)), np.repeat(hi_r, len(lo_c))
+    c0, c1 = np.tile(lo_c, len(lo_r)), np.tile(hi_c, len(lo_r))
     traced = []
     level = 0
     while len(r0):

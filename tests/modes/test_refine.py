@@ -96,3 +96,27 @@ def test_refine_traces_cells_whose_shading_the_grid_cannot_follow():
     assert out.traced_mask[12:20, 20:23].all()
     assert np.allclose(out.image[12:20, 20:23], 5.0)
     assert out.stats["refined_pixels"] <= 0.3 * height * width  # ROUGH_BUDGET
+
+
+def test_refine_finds_edges_along_a_single_grid_row():
+    # a 1-pixel-high image: the grid is one row, its cells have no height
+    from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
+    from mitsuba_mrt.types import SeedStream
+
+    shapes = np.array([1] * 6 + [2] * 13 + [1] * 5 + [3])  # a second stripe of shape 1
+    values = np.where(shapes == 1, 1.0, np.where(shapes == 2, 100.0, 50.0))
+    pattern = grid_pattern(25, 1, 4 / 25)  # one grid row of 10 columns
+
+    def trace_at(xy):
+        n = len(xy)
+        return SparseTrace(np.repeat(values[xy[:, 0], None], 3, 1), np.ones((n, 3)),
+                           shapes[xy[:, 0]].astype(np.int64), np.zeros(n, np.uint32), 0, 1,
+                           0.0)
+
+    def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True):
+        return trace_at(xy)
+
+    out = reconstruct(pattern, trace_at(pattern.pixel_xy), MRTParams(), "refine", tracer)
+    every = np.stack([np.arange(25), np.zeros(25, np.int64)], axis=1)
+    assert np.array_equal(out.ids[0], trace_at(every).ids("exact"))
+    assert np.allclose(out.image[0, :, 0], values)
