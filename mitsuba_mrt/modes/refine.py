@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from ..recon.sampling import SamplePattern
 from ..recon.within_region import interpolate_traced_grid
-from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
+from ..types import (MRTParams, Reconstruction, SeedStream, SparseTrace, Timings, Tracer,
                      check_radiance)
 from .fast import skips_from
 
