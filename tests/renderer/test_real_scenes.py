@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 import mitsuba_mrt
-from mitsuba_mrt import MRTError
 from mitsuba_mrt.recon.metrics import paper_error
 
 from conftest import ROOT

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import traceback
 from collections import defaultdict
 from dataclasses import dataclass, field, replace
@@ -27,7 +26,7 @@ from functools import cached_property
 import numpy as np
 from hypothesis import note, strategies as st
 
-from mitsuba_mrt import MRTError, MRTParams, SparseTrace, grid_pattern, reconstruct
+from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
 
 MODES = ("paper", "fast", "refine", "idpass")
 F32_MAX = float(np.finfo(np.float32).max)

@@ -15,7 +15,7 @@ from hypothesis import given, strategies as st
 
 from mitsuba_mrt import MRTError, MRTParams, SparseTrace, grid_pattern, reconstruct
 
-from .stress_support import (ALBEDOS, CONSTANT_ALBEDOS, MODES, VALUES, Case, bound_tolerance,
+from .stress_support import (CONSTANT_ALBEDOS, MODES, VALUES, Case, bound_tolerance,
                              cases, check, degenerate_cases, finish, ratio, region_samples)
 
 
