@@ -47,6 +47,11 @@ class MRTParams:
     denoise : {'none', 'oidn'}
         Denoise the traced grid before reconstructing it (``oidn``: Intel
         Open Image Denoise, with the trace's albedo and normals).
+    noise_smoothing : float
+        In ``fast``, ``refine`` and ``idpass``, average each traced grid
+        value with the neighbours of its id that agree with it within this
+        many noise standard deviations (the trace's own variance) before
+        interpolating; traced pixels keep their traced value; 0: off.
     """
 
     sample_fraction: float = 0.1
@@ -57,6 +62,7 @@ class MRTParams:
     id_rule: str = "auto"
     rbf_degree: int = -1
     denoise: str = "none"
+    noise_smoothing: float = 1.5
 
     def __post_init__(self):
         check_fraction("sample_fraction", self.sample_fraction)
@@ -75,6 +81,9 @@ class MRTParams:
             raise MRTError(f"rbf_degree must be -1, 0 or 1, got {self.rbf_degree}")
         if self.denoise not in DENOISERS:
             raise MRTError(f"denoise must be one of {', '.join(DENOISERS)}, got {self.denoise!r}")
+        if not (math.isfinite(self.noise_smoothing) and self.noise_smoothing >= 0):
+            raise MRTError(f"noise_smoothing must be a finite number >= 0, "
+                           f"got {self.noise_smoothing}")
 
     def rule_for(self, mode: str) -> str:
         """The id rule in force for ``mode`` (``auto`` resolved)."""

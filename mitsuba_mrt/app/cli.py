@@ -38,6 +38,8 @@ _PARAM_OPTIONS = (
     ("filter_cutoff", float, "normalised cutoff of the id smoothing"),
     ("max_inpoints", int, "most RBF centres per id"),
     ("num_cappoints", int, "brightest and darkest capstones per id"),
+    ("noise_smoothing", float, "in fast, refine and idpass, average traced grid values "
+                               "that agree within this many noise sigmas; 0: off"),
 )
 
 

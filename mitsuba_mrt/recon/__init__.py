@@ -5,7 +5,8 @@ traced grid), :mod:`.ids` (region ids), :mod:`.edges` (quadtree fill and
 Gaussian smoothing), :mod:`.interpolate` (per-id RBF; kernels in
 :mod:`.rbf`, :mod:`.rbf_solve`, :mod:`.rbf_fast`), :mod:`.within_region`
 (the grid interpolator of the fast modes; its fits in :mod:`.quadric_jit`
-where Dr.Jit's LLVM backend runs), :mod:`.compose` (albedo), :mod:`.upsample`
+where Dr.Jit's LLVM backend runs; noisy grids smoothed first by
+:mod:`.smooth`), :mod:`.compose` (albedo), :mod:`.upsample`
 (scene-agnostic baselines) and :mod:`.metrics`.
 """
 

@@ -23,6 +23,9 @@ AUTO_BAND = 16
 AUTO_MIN_SAMPLES = 1 << 21
 #: Share of the pixels that ``refine`` is expected to trace beyond the grid.
 AUTO_REFINE_SHARE = 0.1
+#: On the pilot's band, mean squared errors closer than this share of the
+#: band's own noise (per-pixel variance of a full render) count as equal.
+BAND_TIE = 0.05
 
 
 @dataclass
@@ -157,7 +160,8 @@ def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: 
     pixels neither traced, the mean squared difference to the band's render
     is the reconstruction's error plus the band's own noise ``s2``; the MRT's
     image is as accurate as a full render where that difference is at most
-    ``2 s2``, and it must also be at most bicubic's.  The figures go into
+    ``2 s2``, and it must also be at most bicubic's (ties within
+    ``BAND_TIE s2`` count as equal).  The figures go into
     ``decision``.
     """
     width, band_height = pattern.width, pilot.band_height
@@ -191,7 +195,8 @@ def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: 
     decision.band_mse_mrt = float(np.mean((recon.image - image)[untraced] ** 2))
     decision.band_mse_bicubic = float(np.mean((bicubic.image - image)[untraced] ** 2))
     decision.band_noise = noise
-    tiny = 1e-9 * float(np.mean(image ** 2))  # differences of rounding, not of accuracy
+    # differences of rounding, or far below the band's own noise, are not of accuracy
+    tiny = 1e-9 * float(np.mean(image ** 2)) + BAND_TIE * noise
     return (decision.band_mse_mrt <= 2.0 * noise + tiny
             and decision.band_mse_mrt <= decision.band_mse_bicubic + tiny)
 

@@ -127,6 +127,11 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - |string|
        - ``oidn``: denoise the traced grid with Intel Open Image Denoise before
          reconstructing it (needs ``pip install mitsuba-mrt[denoise]``) (Default: none).
+     * - noise_smoothing
+       - |float|
+       - In ``fast``, ``refine`` and ``idpass``: average each traced grid value with
+         the samples of its id nearby that agree with it within this many standard
+         deviations of the trace's noise, before interpolating; 0: off (Default: 1.5).
      * - mode
        - |string|
        - Reconstruction: ``auto`` (``refine`` or ``idpass`` when a pilot
