@@ -173,12 +173,14 @@ class Timings:
 
     ``trace`` is the grid's trace (the pilot's, for ``auto``); ``trace_more``
     every pixel traced beyond the grid (edges for ``refine``, the id pass and
-    thin regions for ``idpass``, ``auto``'s full-width band); ``full_render``
-    the full render that ``auto`` may fall back to.
+    thin regions for ``idpass``, ``auto``'s full-width band); ``check``
+    ``auto``'s accuracy check on that band; ``full_render`` the full render
+    that ``auto`` may fall back to.
     """
 
     trace: float = 0.0
     trace_more: float = 0.0
+    check: float = 0.0
     denoise: float = 0.0
     edges: float = 0.0
     interpolate: float = 0.0
@@ -189,8 +191,8 @@ class Timings:
     def close(self, total: float) -> "Timings":
         """Set ``total`` and put what the stages do not account for into ``other``."""
         self.total = total
-        self.other = max(0.0, total - (self.trace + self.trace_more + self.denoise + self.edges
-                                       + self.interpolate + self.full_render))
+        self.other = max(0.0, total - (self.trace + self.trace_more + self.check + self.denoise
+                                       + self.edges + self.interpolate + self.full_render))
         return self
 
 

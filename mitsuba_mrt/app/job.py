@@ -166,6 +166,8 @@ def summary_line(summary: RunSummary) -> str:
             f"traced {' + '.join(parts) or 'nothing'} = "
             f"{100.0 * traced.total / pixels:.1f}% of the pixels; "
             f"{t.total:.3f} s = trace {t.trace:.3f} + more {t.trace_more:.3f}"
+            f"{f' + accuracy check {t.check:.3f}' if t.check else ''}"
+            f"{f' + denoise {t.denoise:.3f}' if t.denoise else ''}"
             f" + edges {t.edges:.3f} + interpolate {t.interpolate:.3f}"
             f"{f' + full render {t.full_render:.3f}' if t.full_render else ''}"
             f" + other {t.other:.3f}")

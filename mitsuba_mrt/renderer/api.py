@@ -156,7 +156,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         if decision.mode_used == "full":
             return _rest_in_full(pattern, pilot, tracer, params, spp, decision, start)
         trace = auto.rest_of_grid(pattern, pilot, tracer)
-        timings.trace_more = pilot.band.seconds
+        timings.trace_more, timings.check = pilot.band.seconds, decision.check_s
     else:
         trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID)
     used = decision.mode_used if decision else mode
@@ -216,7 +216,7 @@ def _rest_in_full(pattern: SamplePattern, pilot: auto.Pilot, tracer: GridTracer,
     """The full render that ``auto`` falls back to after a pilot.
 
     The pilot's band is kept and the remaining rows are traced the same way
-    (every sample of a pixel averaged, as a box pixel filter does), so the
+    (each pixel's samples placed and weighted by the film's filter), so the
     pilot is not wasted.  Ids are not traced per pixel: the pilot's grid ids
     are nearest-filled.
     """
@@ -229,7 +229,8 @@ def _rest_in_full(pattern: SamplePattern, pilot: auto.Pilot, tracer: GridTracer,
     check_radiance(image, "pixels")
     sub = SamplePattern(width, height, pattern.rows[pilot.rows], pattern.cols)
     ids = sub.nearest_image(pilot.grid.ids(params.rule_for("fast")))
-    timings = Timings(trace=pilot.grid.seconds, full_render=pilot.band.seconds + rest.seconds)
+    timings = Timings(trace=pilot.grid.seconds, check=decision.check_s,
+                      full_render=pilot.band.seconds + rest.seconds)
     return _full_result(image, alpha, ids, pattern, pilot.grid, params, spp, decision, timings,
                         start)
 

@@ -54,6 +54,8 @@ class AutoDecision:
         squared difference to the band's own render at untraced pixels of
         the chosen mode and of bicubic, and the band's noise (variance of a
         pixel's mean).
+    check_s : float
+        Seconds of that accuracy check (its id pass and reconstructions).
     """
 
     mode_used: str
@@ -67,6 +69,7 @@ class AutoDecision:
     band_mse_mrt: float | None = None
     band_mse_bicubic: float | None = None
     band_noise: float | None = None
+    check_s: float = 0.0
 
 
 @dataclass
@@ -144,7 +147,9 @@ def decide(pattern: SamplePattern, tracer: Tracer,
                             compile_s=band_compile[0] + grid_compile[0])
     pilot = Pilot(band, band_height, rows, grid)
     if wins and len(rows) >= 2:
+        begin = time.perf_counter()
         accurate = band_accuracy(pattern, pilot, tracer, params, best, decision)
+        decision.check_s = time.perf_counter() - begin
         if not accurate:
             decision.mode_used, decision.reason = "full", "inaccurate"
     return decision, pilot

@@ -27,8 +27,8 @@ def test_render_writes_every_output(tmp_path):
     assert summary["width"] == summary["height"] == 48  # -D res=48 took effect
     assert summary["sample_fraction"] == 0.2
     timings = summary["timings"]
-    assert set(timings) == {"trace", "trace_more", "denoise", "edges", "interpolate", "full_render",
-                            "other", "total"}
+    assert set(timings) == {"trace", "trace_more", "check", "denoise", "edges", "interpolate",
+                            "full_render", "other", "total"}
     # the parts add up to the total
     assert sum(v for k, v in timings.items() if k != "total") == pytest.approx(timings["total"])
     assert summary["traced"]["grid"] > 0 and summary["traced"]["more"] > 0  # refine's edges

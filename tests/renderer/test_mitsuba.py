@@ -260,6 +260,8 @@ def test_auto_checks_accuracy_on_the_pilot_band(variant, monkeypatch):
     result = mitsuba_mrt.render(scene, spp=8)
     assert result.auto.reason == "pilot" and result.mode_used in ("refine", "idpass")
     assert result.auto.band_mse_mrt is not None and result.auto.band_mse_bicubic is not None
+    # the check's time is its own part of the total, not 'other'
+    assert result.timings.check == result.auto.check_s > 0
     # a reconstruction that is off on the band is not chosen
     real = auto.reconstruct
 
