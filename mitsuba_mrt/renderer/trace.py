@@ -288,13 +288,16 @@ def _shape_lookup(scene: mi.Scene):
     return {id(s): k + 1 for k, s in enumerate(shapes)}
 
 
-#: Samples per pixel whose first hit gives the albedo (the first ones of each
-#: pixel; all of them when a pixel has fewer), and per pixel of an albedo-only pass.
+#: Samples per pixel of an albedo-only pass (the id pass).  A pixel traced
+#: with the nested integrator takes its albedo from all of its samples, the
+#: same ones as its radiance, so that the two see the same footprint.
 ALBEDO_SAMPLES = 16
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
-#: it would turn the noise of a nearly black surface into huge values.
-ALBEDO_MIN = 0.01
+#: it would turn the noise of a nearly black surface into huge values.  Dark
+#: textures go far lower (black in an sRGB PNG is about 0.003 linear), and
+#: their pixels must be demodulated like their bright neighbours.
+ALBEDO_MIN = 0.001
 
 #: Channels of the image block the samples are developed in: weighted RGB,
 #: alpha, the weight, RGB squared (for the variance), albedo and its weight,
@@ -447,9 +450,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         alpha = dr.select(active & valid, 1.0, 0.0)
     a_weight, a_rgb = zero, mi.Color3f(0.0)
     if albedo:  # averaged over the samples that hit a surface
-        first = active & ((lane % spp) < min(spp, ALBEDO_SAMPLES))
-        a_rgb, hit = _directional_albedo(scene, sampler, ray, first)
-        a_weight = dr.select(first & hit, weight, 0.0)
+        a_rgb, hit = _directional_albedo(scene, sampler, ray, active)
+        a_weight = dr.select(active & hit, weight, 0.0)
     values = [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
               a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid]
@@ -504,7 +506,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
                 if not np.isfinite(rgb).all():
                     rgb, invalid = np.zeros(3), 1.0
             a_rgb, a_weight = np.zeros(3), 0.0
-            if albedo and s < ALBEDO_SAMPLES:
+            if albedo:
                 a_rgb, hit = _directional_albedo(scene, sampler, ray, True)
                 a_rgb, a_weight = np.asarray(a_rgb, np.float64), weight if hit else 0.0
             values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
