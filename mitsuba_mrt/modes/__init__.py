@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import MRTError
 from ..recon.bounds import suppress_fireflies
-from ..recon.compose import safe_albedo
+from ..recon.compose import demodulate, safe_albedo
 from ..recon.sampling import SamplePattern
 from ..recon.smooth import smooth_grid
 from ..runtime.jit import jit_workers_parked
@@ -110,7 +110,7 @@ def smoothed_trace(pattern: SamplePattern, trace: SparseTrace, params: MRTParams
         return trace
     grid = pattern.grid_shape + (3,)
     albedo = safe_albedo(trace.albedo)
-    values = (trace.radiance / albedo).reshape(grid)
+    values = demodulate(trace.radiance, trace.albedo).reshape(grid)
     noise = (trace.variance / (trace.spp * albedo * albedo)).reshape(grid)
     ids = trace.ids(params.rule_for(mode)).reshape(pattern.grid_shape)
     suppressed, fireflies = suppress_fireflies(ids, values)
