@@ -103,10 +103,10 @@ def smoothed_trace(pattern: SamplePattern, trace: SparseTrace, params: MRTParams
     (:func:`mitsuba_mrt.recon.smooth.smooth_grid` on radiance / albedo, so
     textures are not blurred), or ``trace`` itself where that does not apply:
     modes outside :data:`SMOOTHED_MODES`, ``noise_smoothing`` 0, no variance
-    (noise-free trace), or a denoised grid.  Fireflies are left to the modes.
+    or only zeros (a deterministic trace), or a denoised grid.  Fireflies are left to the modes.
     """
     if (mode not in SMOOTHED_MODES or params.noise_smoothing <= 0 or trace.variance is None
-            or params.denoise != "none" or trace.spp < 1):
+            or params.denoise != "none" or not trace.variance.any()):
         return trace
     grid = pattern.grid_shape + (3,)
     albedo = safe_albedo(trace.albedo)

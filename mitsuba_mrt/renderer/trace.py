@@ -299,6 +299,10 @@ ALBEDO_SAMPLES = 16
 #: their pixels must be demodulated like their bright neighbours.
 ALBEDO_MIN = 0.001
 
+#: A pixel's sample variance below this share of its samples' mean square is
+#: taken as 0: the sums are float32, so their difference rounds to ~1e-7 of it.
+VARIANCE_FLOOR = 1e-6
+
 #: Channels of the image block the samples are developed in: weighted RGB,
 #: alpha, the weight, RGB squared (for the variance), albedo and its weight,
 #: and the count of samples whose radiance was NaN or Inf.
@@ -380,22 +384,33 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
 
 def _read_sums(sums: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
     """The developed values of the traced pixels from their filter-weighted sums."""
-    weight = sums[:, 4:5]
-    safe = np.where(weight != 0.0, weight, 1.0)
-    radiance = np.where(weight != 0.0, sums[:, 0:3] / safe, 0.0)
-    second = np.where(weight != 0.0, sums[:, 5:8] / safe, 0.0)
-    albedo_weight = sums[:, 11:12]
-    albedo = np.where(albedo_weight > 0.0,
-                      sums[:, 8:11] / np.where(albedo_weight > 0.0, albedo_weight, 1.0), 0.0)
+    def reciprocal(weight):  # 0 where nothing was accumulated
+        out = np.zeros_like(weight)
+        np.divide(1.0, weight, out=out, where=weight != 0.0)
+        return out
+
+    per_weight = reciprocal(sums[:, 4])[:, None]
+    radiance = sums[:, 0:3] * per_weight
+    second = sums[:, 5:8] * per_weight
+    albedo = sums[:, 8:11] * reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
     radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
-    return _Developed(radiance, np.where(weight[:, 0] != 0.0, sums[:, 3] / safe[:, 0], 0.0),
-                      np.maximum(second - radiance ** 2, 0.0), np.clip(albedo, 0.0, 1.0))
+    variance = second - radiance ** 2
+    # below this it is the float32 sums' rounding (a single sample's is all rounding)
+    variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
+    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance,
+                      np.clip(albedo, 0.0, 1.0))
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
     """Whether ``pixel_xy`` is every pixel of the image, each once."""
-    return len(pixel_xy) == width * height and len(
-        np.unique(pixel_xy[:, 1] * width + pixel_xy[:, 0])) == width * height
+    count = width * height
+    if len(pixel_xy) != count:
+        return False
+    x, y = pixel_xy[:, 0], pixel_xy[:, 1]
+    if x.min() < 0 or y.min() < 0 or x.max() >= width or y.max() >= height:
+        return False
+    # a counting pass, not a sort: the id pass asks this of every pixel
+    return bool((np.bincount(y * width + x, minlength=count) == 1).all())
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):

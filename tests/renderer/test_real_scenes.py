@@ -226,3 +226,26 @@ def test_dark_texture_squares_are_demodulated_like_bright_ones(variant):
     black = (idpass.trace.albedo.max(axis=1) < 0.01) & (idpass.trace.shape_index > 0)
     assert black.any() and (idpass.trace.albedo[black] > 0).all()
     assert paper_error(idpass.image, converged) < 2.5 * paper_error(full, converged)
+
+
+def test_one_sample_per_pixel_has_no_variance_and_no_smoothing(variant):
+    # the float32 sums leave ~1e-7 of rounding in second moment - mean^2; a
+    # single deterministic sample has no noise, so nothing is smoothed
+    from mitsuba_mrt.modes import smoothed_trace
+    from mitsuba_mrt.types import MRTParams
+
+    scene = mi.load_string(path_scene(res=32, spp=1))
+    result = mitsuba_mrt.render(scene, mode="fast", sample_fraction=0.2)
+    assert not result.trace.variance.any()
+    assert smoothed_trace(result.pattern, result.trace, MRTParams(), "fast") is result.trace
+
+
+def test_every_pixel_is_recognised_in_any_order_and_only_once():
+    from mitsuba_mrt.renderer.trace import _every_pixel
+
+    xy = np.stack(np.meshgrid(np.arange(5), np.arange(4)), -1).reshape(-1, 2)
+    assert _every_pixel(xy, 5, 4) and _every_pixel(xy[::-1], 5, 4)
+    twice = xy.copy()
+    twice[3] = twice[4]
+    assert not _every_pixel(twice, 5, 4)
+    assert not _every_pixel(xy, 4, 5) and not _every_pixel(xy[:-1], 5, 4)
