@@ -54,6 +54,7 @@ class Field:
     albedo: np.ndarray         # (h, w, 3) float64
     visible: np.ndarray        # (h, w) uint32
     num_lights: int = 0
+    noise: float = 0.0         # a pixel's noise, relative to its radiance (0: noise-free)
 
     @property
     def height(self):
@@ -67,12 +68,16 @@ class Field:
         xy = np.asarray(pixel_xy, dtype=np.int64).reshape(-1, 2)
         r, c = xy[:, 1], xy[:, 0]
         n = len(xy)
+        values = self.radiance[r, c].copy() if radiance else np.zeros((n, 3))
         return SparseTrace(
-            self.radiance[r, c].copy() if radiance else np.zeros((n, 3)),
+            values,
             self.albedo[r, c].copy() if aovs else np.zeros((n, 3)),
             self.shape_index[r, c].copy() if aovs else np.zeros(n, np.int64),
             self.visible[r, c].copy() if aovs else np.zeros(n, np.uint32),
-            self.num_lights, 1, 0.0)
+            self.num_lights, 1, 0.0,
+            # the variance a noisy trace reports (1 spp: of the pixel's mean too);
+            # it scales with the radiance, as a renderer's does
+            variance=(self.noise * values) ** 2 if radiance and self.noise else None)
 
     def tracer(self, pixel_xy, *, stream=None, aovs=True, radiance=True) -> SparseTrace:
         """The modes' :class:`mitsuba_mrt.types.Tracer` (noise-free: ``stream`` is unused)."""
@@ -211,6 +216,7 @@ class Case:
     background: bool = False   # label 0 is the background (shape 0)
     precision: str = "f32"     # f32: radiance rounded to float32, as Mitsuba returns it
     rbf_degree: int = -1       # MRTParams.rbf_degree (paper mode only)
+    noise: float = 0.0         # Field.noise: the variance the trace reports
 
     @cached_property
     def pattern(self):
@@ -229,7 +235,7 @@ class Case:
         albedo = _albedo(self.albedo, labels, rng)
         shapes = labels if self.background else labels + 1
         return Field(shapes.astype(np.int64), values, albedo,
-                     np.zeros(labels.shape, np.uint32), 0)
+                     np.zeros(labels.shape, np.uint32), 0, self.noise)
 
     @property
     def params(self) -> MRTParams:
@@ -260,7 +266,9 @@ class Case:
             "    return SparseTrace(field[r, c] if radiance else np.zeros((n, 3)),",
             "                       albedo[r, c] if aovs else np.zeros((n, 3)),",
             "                       shape_index[r, c] if aovs else np.zeros(n, np.int64),",
-            "                       np.zeros(n, np.uint32), 0, 1, 0.0)",
+            "                       np.zeros(n, np.uint32), 0, 1, 0.0,",
+            f"                       variance=({self.noise!r} * field[r, c]) ** 2 "
+            f"if radiance and {self.noise!r} else None)",
             f"p = grid_pattern({self.width}, {self.height}, {self.fraction!r})",
             f"out = reconstruct(p, tracer(p.pixel_xy), MRTParams(sample_fraction={self.fraction!r}, "
             f"rbf_degree={self.rbf_degree}), {mode!r}, tracer)",
@@ -284,6 +292,9 @@ def _array_code(values: np.ndarray, shapes: np.ndarray) -> str:
 
 # --------------------------------------------------------------------------- strategies
 
+#: the trace's reported noise, relative to the radiance: none, slight, heavy
+NOISES = st.sampled_from((0.0, 0.05, 0.5))
+
 FRACTIONS = st.one_of(st.sampled_from([1.0, 0.5, 0.25, 0.1, 1e-9, 1e-300]),
                       st.floats(0.005, 1.0))
 
@@ -299,7 +310,7 @@ def cases(draw, *, layouts=LAYOUTS, values=VALUES, albedos=ALBEDOS, exponents=(-
                 exponent=draw(st.integers(*exponents)),
                 seed=draw(st.integers(0, 2 ** 16)), background=draw(st.booleans()),
                 precision=draw(st.sampled_from(precisions)),
-                rbf_degree=draw(st.sampled_from(degrees)))
+                rbf_degree=draw(st.sampled_from(degrees)), noise=draw(NOISES))
 
 
 @st.composite
@@ -316,7 +327,8 @@ def degenerate_cases(draw):
                 albedo=draw(st.sampled_from(ALBEDOS)),
                 exponent=draw(st.integers(-30, 30)),
                 seed=draw(st.integers(0, 2 ** 16)), background=draw(st.booleans()),
-                precision="f32", rbf_degree=draw(st.sampled_from((-1, 0, 1))))
+                precision="f32", rbf_degree=draw(st.sampled_from((-1, 0, 1))),
+                noise=draw(NOISES))
 
 
 # --------------------------------------------------------------------------- region helpers
