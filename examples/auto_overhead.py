@@ -3,9 +3,10 @@
     python examples/auto_overhead.py --res 200 400
 
 For each scene of ``scenes_xml/`` (with its own integrator and spp) and each
-resolution, the full render and ``render(mode="auto")`` run alternately
-``--rounds`` times in this process after a warm-up; the lower medians, their
-ratio and the mode ``auto`` used are printed, the worst ratio last.
+resolution, the full render and ``render(mode="auto")`` run alternately, each
+first in every other round, ``--rounds`` times in this process after a warm-up;
+the lower medians, their ratio and the mode ``auto`` used are printed, the worst
+ratio last.
 """
 
 import argparse
@@ -32,10 +33,14 @@ def main():
             mitsuba_mrt.render_reference(scene)
             mitsuba_mrt.render(scene)  # warm-up
             full, auto = [], []
-            for _ in range(args.rounds):
+            for k in range(args.rounds):
+                if k % 2:  # which goes first alternates too: no order effect
+                    result = mitsuba_mrt.render(scene)
+                    auto.append(result.timings.total)
                 full.append(mitsuba_mrt.render_reference(scene)[1])
-                result = mitsuba_mrt.render(scene)
-                auto.append(result.timings.total)
+                if not k % 2:
+                    result = mitsuba_mrt.render(scene)
+                    auto.append(result.timings.total)
             f, a = statistics.median_low(full), statistics.median_low(auto)
             used = result.mode_used
             print(f"{path.name:34s} {res:5d} {f:9.4f} {a:9.4f} {a / f:6.3f}  {used}")
