@@ -86,7 +86,8 @@ def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = 
     if shapes != ((n, 3), (n, 3), (n,), (n,)):
         raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
     check_radiance(trace.radiance)
-    with jit_workers_parked():  # none of Dr.Jit's workers busy-waits beside numpy
+    # none of Dr.Jit's workers busy-waits beside numpy (on images big enough to matter)
+    with jit_workers_parked(pattern.width * pattern.height):
         start = time.perf_counter()
         smoothed = smoothed_trace(pattern, trace, params, mode)
         seconds = time.perf_counter() - start

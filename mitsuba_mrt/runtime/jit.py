@@ -50,10 +50,16 @@ def cuda_usable() -> bool:
 #: replaced with 1 (their own worker-less count), innermost last.
 _parked_counts: list[int] = []
 
+#: Images smaller than this are reconstructed without parking the workers:
+#: their numpy stages are short, and every resize of Dr.Jit's pool risks a
+#: lost wake-up in its thread pool (a hang, seen once in a thorough stress run).
+PARK_MIN_PIXELS = 256 * 256
+
 
 @contextlib.contextmanager
-def jit_workers_parked():
-    """Run the block with Dr.Jit's worker threads stopped, then restore them.
+def jit_workers_parked(pixels: int | None = None):
+    """Run the block with Dr.Jit's worker threads stopped, then restore them;
+    for an image of fewer than :data:`PARK_MIN_PIXELS` ``pixels``, leave them.
 
     Inside, a Dr.Jit kernel runs on the calling thread alone, unless it is
     wrapped in :func:`jit_workers`; nobody busy-waits beside numpy.  The
@@ -73,14 +79,15 @@ def jit_workers_parked():
     import drjit as dr
 
     count = dr.thread_count()
-    if count > 1:
+    park = count > 1 and (pixels is None or pixels >= PARK_MIN_PIXELS)
+    if park:
         dr.set_thread_count(1)
-    _parked_counts.append(count)
+    _parked_counts.append(count if park else 1)  # unparked: jit_workers has nothing to do
     try:
         yield
     finally:
         _parked_counts.pop()
-        if count > 1:
+        if park:
             dr.set_thread_count(count)
 
 

@@ -261,9 +261,15 @@ def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, m
     p = grid_pattern(48, 40, 0.15)
     shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)
     t = trace_from(p, np.random.default_rng(4).random((p.count, 3)), shape_index=shapes)
+    monkeypatch.setattr(jit, "PARK_MIN_PIXELS", 48 * 40)  # this image counts as big
     reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
     assert seen == {"smoothing": 1, "fits": three_jit_threads}
     assert dr.thread_count() == three_jit_threads
+    # a smaller image is not worth a resize of Dr.Jit's pool: the workers stay
+    monkeypatch.setattr(jit, "PARK_MIN_PIXELS", 48 * 40 + 1)
+    seen.clear()
+    reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
+    assert seen == {"smoothing": three_jit_threads, "fits": three_jit_threads}
 
 
 @pytest.mark.parametrize("seed", range(4))
