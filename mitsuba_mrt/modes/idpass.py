@@ -17,7 +17,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..recon.compose import safe_albedo
+from ..recon.compose import demodulate, safe_albedo
 from ..recon.sampling import SamplePattern, cell_coordinates
 from ..recon.within_region import GridValues, black_background, interpolate_within_ids
 from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
@@ -69,7 +69,7 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
 
     start = time.perf_counter()
     # irradiance over a power of two per channel: float32 work cannot overflow
-    grid = GridValues.from_samples(pattern, grid_ids, trace.radiance / safe_albedo(trace.albedo))
+    grid = GridValues.from_samples(pattern, grid_ids, demodulate(trace.radiance, trace.albedo))
     constant = black_background(grid_ids.ravel(), trace.radiance, stats)
     skips = Skips(background=stats.pop("background", 0))
     interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values, id_map, constant)
