@@ -298,11 +298,14 @@ class Tracer(Protocol):
 
     ``pixel_xy`` is (n, 2) of (column, row); with ``radiance`` the nested
     integrator runs, with ``aovs`` the id AOVs (albedo, shape, lights) are
-    traced; what is not traced is zero.
+    traced; what is not traced is zero.  ``replay`` says the same number of
+    pixels is traced again on the next render of the image (the grid, the id
+    pass): its kernels are recorded once and replayed after.
     """
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
-                 aovs: bool = True, radiance: bool = True) -> "SparseTrace": ...
+                 aovs: bool = True, radiance: bool = True,
+                 replay: bool = False) -> "SparseTrace": ...
 
 
 def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:

@@ -56,7 +56,7 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     height, width = pattern.height, pattern.width
     start = time.perf_counter()
     every = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
-    aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False)
+    aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False, replay=True)
     id_map = aov.ids(rule).reshape(height, width)
     albedo = safe_albedo(aov.albedo).reshape(height, width, 3)
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)

@@ -97,9 +97,10 @@ class GridTracer:
     seed: int
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
-                 aovs: bool = True, radiance: bool = True) -> SparseTrace:
+                 aovs: bool = True, radiance: bool = True,
+                 replay: bool = False) -> SparseTrace:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
-                            self.seed + int(stream), aovs, radiance)
+                            self.seed + int(stream), aovs, radiance, replay)
 
 
 def _check_spp(spp: int | None) -> int | None:
@@ -158,7 +159,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         trace = auto.rest_of_grid(pattern, pilot, tracer)
         timings.trace_more, timings.check = pilot.band.seconds, decision.check_s
     else:
-        trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID)
+        trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
     used = decision.mode_used if decision else mode
     timings.trace = trace.seconds
     if params.denoise != "none":
@@ -223,7 +224,7 @@ def _rest_in_full(pattern: SamplePattern, pilot: auto.Pilot, tracer: GridTracer,
     width, height = pattern.width, pattern.height
     rest_xy = np.stack(np.meshgrid(np.arange(width), np.arange(pilot.band_height, height)),
                        -1).reshape(-1, 2)
-    rest = tracer(rest_xy, stream=SeedStream.REST, aovs=False)
+    rest = tracer(rest_xy, stream=SeedStream.REST, aovs=False, replay=True)
     image = np.concatenate([pilot.band.radiance, rest.radiance]).reshape(height, width, 3)
     alpha = np.concatenate([pilot.band.alpha, rest.alpha]).reshape(height, width)
     check_radiance(image, "pixels")

@@ -121,9 +121,9 @@ def decide(pattern: SamplePattern, tracer: Tracer,
     xy = pattern.pixel_xy.reshape(nr, -1, 2)
     rows = np.flatnonzero(pattern.rows < band_height)
     with compile_seconds() as band_compile:
-        band = tracer(band_xy, stream=SeedStream.BAND, aovs=False)
+        band = tracer(band_xy, stream=SeedStream.BAND, aovs=False, replay=True)
     with compile_seconds() as grid_compile:
-        grid = tracer(xy[rows].reshape(-1, 2), stream=SeedStream.PILOT)
+        grid = tracer(xy[rows].reshape(-1, 2), stream=SeedStream.PILOT, replay=True)
     band_s = max(band.seconds - band_compile[0], 0.1 * band.seconds)
     grid_s = max(grid.seconds - grid_compile[0], 0.1 * grid.seconds)
     scale = height / band_height
@@ -171,7 +171,8 @@ def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: 
     """
     width, band_height = pattern.width, pilot.band_height
     ids = tracer(np.stack(np.meshgrid(np.arange(width), np.arange(band_height)),
-                          -1).reshape(-1, 2), stream=SeedStream.ID_PASS, radiance=False)
+                          -1).reshape(-1, 2), stream=SeedStream.ID_PASS, radiance=False,
+                 replay=True)
     band = pilot.band
     image = band.radiance.reshape(band_height, width, 3)
 
@@ -214,7 +215,7 @@ def rest_of_grid(pattern: SamplePattern, pilot: Pilot, tracer: Tracer) -> Sparse
     nr, nc = pattern.grid_shape
     rest_rows = np.setdiff1d(np.arange(nr), pilot.rows)
     rest = tracer(pattern.pixel_xy.reshape(nr, nc, 2)[rest_rows].reshape(-1, 2),
-                  stream=SeedStream.GRID)
+                  stream=SeedStream.GRID, replay=True)
     merged = merge_rows(pattern, pilot.rows, pilot.grid, rest_rows, rest)
     return replace(merged, seconds=pilot.grid.seconds + rest.seconds)
 

@@ -28,6 +28,7 @@ from ..errors import MRTError
 from ..types import SparseTrace
 from ..runtime.jit import jit_workers
 from .pixel_filter import filter_table
+from .replay import Replay
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32
@@ -103,6 +104,14 @@ def _follow_mirrors(scene, ray, si, valid):
             chain.append((True, new_si.shape if new_si.is_valid() else None))
             ray, si, valid = new_ray, new_si, bool(new_si.is_valid())
     return ray, si, valid, throughput, chain
+
+
+def replayable(scene: mi.Scene) -> bool:
+    """Whether a trace of ``scene`` can be replayed (:mod:`.replay`): not in a
+    spectral or polarized variant (their colour tables are not among a
+    trace's inputs) and not without shapes (Dr.Jit finds no instance for the
+    intersection's virtual calls then)."""
+    return not (mi.is_spectral or mi.is_polarized) and len(scene.shapes()) > 0
 
 
 def tracked_lights(scene: mi.Scene) -> list:
@@ -321,7 +330,7 @@ class _Developed:
 
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
-                 radiance: bool = True) -> SparseTrace:
+                 radiance: bool = True, replay: bool = False) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -342,6 +351,12 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     radiance : bool
         Run the nested integrator; without it the radiance is zero and only
         the AOVs cost time (the MRT's cheap full-resolution id pass).
+    replay : bool
+        Record the kernels (:func:`drjit.freeze`) and replay them when this
+        scene, sensor and integrator are traced again with as many pixels
+        and samples, instead of tracing the integrator anew: for the pixel
+        sets every render of an image traces (the grid, the id pass), not
+        for one-off sets, which would only be recorded (:mod:`.replay`).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -353,18 +368,22 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(int(spp))
     spp = sampler.sample_count()
+    replay = replay and is_jit() and replayable(scene)
+    if replay:  # the same state variables on every call, whatever the sensor's sampler did
+        sampler.seed(0, 1)
     zero = np.zeros(n, np.int64)
     with jit_workers():  # all of Dr.Jit's threads, also inside a reconstruction
         develop = _develop_jit if is_jit() else _develop_scalar
         if radiance:
-            samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs)
+            samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs,
+                              replay)
         elif aovs:
             sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
             samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
-                              seed, True)
+                              seed, True, replay)
         if aovs:
             shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
-                scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule)
+                scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
         else:
             shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if not (radiance or aovs):
@@ -413,7 +432,7 @@ def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
     return bool((np.bincount(y * width + x, minlength=count) == 1).all())
 
 
-def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):
+def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -422,26 +441,46 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
-    rfilter = film.rfilter()
-    table = filter_table(rfilter)
+    table = filter_table(film.rfilter())
     n = len(pixel_xy)
     every = _every_pixel(pixel_xy, width, height)
+    # what the kernels bake in, so that a recording is replayed only where it holds
+    layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
+              tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
+              float(table.radius), len(table.pdf))
+    sums = _DEVELOP(scene, sensor, integrator, sampler, mi.Float(pixel_xy[:, 0]),
+                    mi.Float(pixel_xy[:, 1]), mi.Float(table.cdf.astype(np.float32)),
+                    dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), layout,
+                    objects=(scene, sensor, integrator), record=replay)
+    if every:
+        sums = sums.numpy().astype(np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+    else:
+        sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
+                         for total in sums], axis=1)  # (literal zeros broadcast)
+    return _read_sums(sums, pixel_xy)
+
+
+def _develop_kernel(scene, sensor, integrator, sampler, pixel_x, pixel_y, cdf, seed, layout):
+    """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
+    per pixel (a list of channels) or, for every pixel, as an image block's
+    tensor.  Everything they depend on is an argument (``layout`` the Python
+    values), so that :func:`drjit.freeze` can record and replay them."""
+    n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells = layout
+    film = sensor.film()
+    rfilter = film.rfilter()
+    cell = 2.0 * radius / cells
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
-    lane = dr.arange(mi.UInt32, n * spp)
-    owner = lane // spp  # lanes pixel-major, as Mitsuba's own render loop lays them out
-    cdf = mi.Float(table.cdf.astype(np.float32))
+    owner = dr.arange(mi.UInt32, n * spp) // spp  # lanes pixel-major, as Mitsuba's own
 
     def offset(u):  # inverse CDF of the tabulated |filter|
-        k = dr.binary_search(0, len(table.pdf) - 1,
-                             lambda i: dr.gather(mi.Float, cdf, i + 1) <= u)
+        k = dr.binary_search(0, cells - 1, lambda i: dr.gather(mi.Float, cdf, i + 1) <= u)
         lo, hi = dr.gather(mi.Float, cdf, k), dr.gather(mi.Float, cdf, k + 1)
         t = dr.select(hi > lo, (u - lo) / (hi - lo), 0.5)
-        return -table.radius + (mi.Float(k) + t) * table.cell
+        return -radius + (mi.Float(k) + t) * cell
 
     u = sampler.next_2d()
-    pixel = mi.Point2f(dr.gather(mi.Float, mi.Float(pixel_xy[:, 0]), owner),
-                       dr.gather(mi.Float, mi.Float(pixel_xy[:, 1]), owner))
+    pixel = mi.Point2f(dr.gather(mi.Float, pixel_x, owner), dr.gather(mi.Float, pixel_y, owner))
     if every:
         position, weight = pixel + u, mi.Float(1.0)
     else:
@@ -449,7 +488,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         position = pixel + 0.5 + d
         # f / density is a constant of the filter's sign: the weight is that sign
         weight = dr.sign(rfilter.eval(d.x) * rfilter.eval(d.y))
-    active = mi.Bool(True) if film.sample_border() else (
+    active = mi.Bool(True) if sample_border else (
         (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
     weight = dr.select(active, weight, 0.0)
 
@@ -473,15 +512,14 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     # Evaluate once: each reduction below would otherwise re-run the integrator.
     dr.eval(values)
     if every:
-        block = _new_block(film)
-        block.put(position + mi.ScalarVector2f(film.crop_offset()), values, active)
-        sums = block.tensor().numpy().astype(np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
-    else:
-        sums = [dr.block_sum(value, spp) for value in values]
-        dr.eval(sums)
-        sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
-                         for total in sums], axis=1)  # (literal zeros broadcast)
-    return _read_sums(sums, pixel_xy)
+        block = mi.ImageBlock(size=mi.ScalarVector2u(width, height),
+                              offset=mi.ScalarPoint2i(crop_offset), channel_count=_CHANNELS,
+                              rfilter=rfilter, border=False)
+        block.put(position + mi.ScalarVector2f(crop_offset), values, active)
+        return block.tensor()
+    sums = [dr.block_sum(value, spp) for value in values]
+    dr.eval(sums)
+    return sums
 
 
 def _new_block(film) -> mi.ImageBlock:
@@ -489,7 +527,8 @@ def _new_block(film) -> mi.ImageBlock:
                          channel_count=_CHANNELS, rfilter=film.rfilter(), border=False)
 
 
-def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo):
+def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
+                    replay=False):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -536,15 +575,13 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
     return _read_sums(sums, pixel_xy)
 
 
-def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
+def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     """Shape, visible lights and mirror chain of every pixel's centre ray."""
     n = len(pixel_xy)
-    position = mi.Point2f(mi.Float(pixel_xy[:, 0]) + 0.5, mi.Float(pixel_xy[:, 1]) + 0.5)
-    ray, _ = _camera_ray(sensor, sampler, position, 1, centre=True)
-    si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, has_mirrors(scene))
-    pointers = dr.reinterpret_array(mi.UInt32, si.shape)
-    normal = dr.select(valid, si.sh_frame.n, 0.0)
-    dr.eval(mask, pointers, chain, normal)
+    layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
+    mask, pointers, chain, normal = _IDS(scene, sensor, sampler, lights,
+                                         mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1]),
+                                         layout, objects=(scene, sensor), record=replay)
     keys, indices = lookup
 
     def to_index(ptr):
@@ -562,7 +599,21 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
             _path_ids(shape_index, steps, len(keys)), _to_numpy(normal, n))
 
 
-def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
+def _ids_kernel(scene, sensor, sampler, lights, pixel_x, pixel_y, layout):
+    """The kernel of :func:`_ids_jit`: (visible-light mask, shape pointers,
+    mirror chain, shading normal) of each pixel's centre ray, every input an
+    argument as :func:`_develop_kernel`'s."""
+    _, rule, mirrors, _ = layout
+    position = mi.Point2f(pixel_x + 0.5, pixel_y + 0.5)
+    ray, _ = _camera_ray(sensor, sampler, position, 1, centre=True)
+    si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
+    pointers = dr.reinterpret_array(mi.UInt32, si.shape)
+    normal = dr.select(valid, si.sh_frame.n, 0.0)
+    dr.eval(mask, pointers, chain, normal)
+    return mask, pointers, chain, normal
+
+
+def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=False):
     """The scalar variant's :func:`_ids_jit`, pixel by pixel."""
     n = len(pixel_xy)
     shape_index = np.zeros(n, dtype=np.int64)
@@ -580,3 +631,8 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule):
             for b, (_, shape) in enumerate(chain):
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
     return shape_index, visible, _path_ids(shape_index, steps, len(lookup)), normal
+
+
+#: The trace kernels, replayed from a recording when the same trace repeats.
+_DEVELOP = Replay(_develop_kernel)
+_IDS = Replay(_ids_kernel)

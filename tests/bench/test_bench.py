@@ -251,14 +251,10 @@ TIMED = {"repeats", "trace_s", "edges_s", "interpolate_s", "total_s", "total_min
 
 def test_points_on_a_local_cluster_give_the_serial_rows(tmp_path, capsys):
     pytest.importorskip("distributed")
-    import time
-
     argv = ["bench", "objects", "--quick", "--res", "16", "--scenes", str(SCENES),
             "--no-progress"]
-    start = time.perf_counter()
     assert main([*argv, "-o", str(tmp_path / "serial")]) == 0
     assert main([*argv, "-o", str(tmp_path / "dask"), "--workers", "2"]) == 0
-    seconds = time.perf_counter() - start
     assert "dask: local cluster of 2 worker processes" in capsys.readouterr().err
     serial = report.read_csv(tmp_path / "serial" / "objects.csv")
     spread = report.read_csv(tmp_path / "dask" / "objects.csv")
@@ -269,7 +265,6 @@ def test_points_on_a_local_cluster_give_the_serial_rows(tmp_path, capsys):
     assert {r["status"] for r in spread} == {"ok"}
     for name in ("objects.png", "objects_triptych.png", "objects.md"):
         assert (tmp_path / "dask" / name).is_file()
-    assert seconds < 40
 
 
 def test_bench_on_a_cluster_without_dask_is_one_line(monkeypatch, capsys, tmp_path):

@@ -1,0 +1,91 @@
+"""Replaying a trace's kernels instead of tracing the integrator again.
+
+Building a trace's kernels (Python and Mitsuba's C++ recording every
+operation of the integrator, then hashing the result to find the compiled
+kernel) costs tens of milliseconds per call whatever the image size: more
+than the kernels themselves take on a small image or at a few spp.
+:func:`drjit.freeze` records the kernels of a call and replays them on later
+calls with the same inputs' layout, with new values (a new seed, a changed
+texture) but without tracing.
+
+Dr.Jit tells a frozen call's inputs apart by their Dr.Jit variables only, not
+by the plain C++ members of Mitsuba objects: two ``path`` integrators that
+differ only in ``max_depth`` look alike to it, and a recording of one would
+be replayed for the other.  So a :class:`Replay` also keys each recording by
+the identity of the Mitsuba objects it traces (the scene, the sensor, the
+integrator), and by the Python values the kernels bake in (``layout``).  A
+change made through ``mi.traverse`` is an input like any other and is seen;
+a changed attribute of a Python-defined plugin is not (create a new object).
+
+Where Dr.Jit cannot record a trace (it raises), the trace runs plainly, and
+is not tried again for those objects and layout.
+
+Only traces whose size repeats from render to render are recorded (the
+grid, the id pass): a one-off set of pixels, like ``refine``'s edge pixels,
+would be recorded for nothing.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import OrderedDict
+from typing import Callable
+
+import drjit as dr
+
+#: Recordings kept per kernel function (least recently used dropped first).
+RECORDINGS = 8
+#: Traced object sets (scene, sensor, integrator) that keep their key: their
+#: objects are held, so that no other object can take over an identity (a
+#: freed object's ``id``) and be given its recordings.
+KEPT_OBJECTS = 4
+
+_tokens = itertools.count(1)
+
+
+class Replay:
+    """Call ``kernel`` plainly, or replay a recording of it.
+
+    Parameters
+    ----------
+    kernel : callable
+        Builds and evaluates the kernels.  Everything they depend on is an
+        argument: Mitsuba objects, Dr.Jit arrays (any size), and last a tuple
+        ``layout`` of the Python values it bakes in (sizes, flags).
+    """
+
+    def __init__(self, kernel: Callable):
+        def recorded(*args, objects_token):  # the token keys the recording too
+            return kernel(*args)
+
+        self.plain = kernel  # traced on each call
+        self.frozen = dr.freeze(recorded, limit=RECORDINGS, warn_after=1 << 30)
+        self._objects: OrderedDict = OrderedDict()  # id tuple -> (objects held, token)
+        self._failed: set = set()  # (token, layout) that Dr.Jit could not record
+
+    def __call__(self, *args, objects: tuple, record: bool):
+        """``kernel(*args)``; with ``record``, from the recording for these
+        ``objects`` (the Mitsuba objects among ``args``) and layout
+        (``args[-1]``), made now if there is none."""
+        if not record:
+            return self.plain(*args)
+        token = self._token(objects)
+        if (token, args[-1]) in self._failed:
+            return self.plain(*args)
+        try:
+            return self.frozen(*args, objects_token=token)
+        except RuntimeError:  # Dr.Jit cannot record or replay these inputs
+            self._failed.add((token, args[-1]))
+            return self.plain(*args)
+
+    def _token(self, objects: tuple) -> int:
+        ids = tuple(id(o) for o in objects)
+        held = self._objects.get(ids)
+        if held is not None and all(a is b for a, b in zip(held[0], objects)):
+            self._objects.move_to_end(ids)
+            return held[1]
+        token = next(_tokens)  # never reused: a new object never meets an old recording
+        self._objects[ids] = (objects, token)
+        if len(self._objects) > KEPT_OBJECTS:
+            self._objects.popitem(last=False)
+        return token
