@@ -369,8 +369,6 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     sampler.set_sample_count(int(spp))
     spp = sampler.sample_count()
     replay = replay and is_jit() and replayable(scene)
-    if replay:  # the same state variables on every call, whatever the sensor's sampler did
-        sampler.seed(0, 1)
     zero = np.zeros(n, np.int64)
     with jit_workers():  # all of Dr.Jit's threads, also inside a reconstruction
         develop = _develop_jit if is_jit() else _develop_scalar
@@ -437,7 +435,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
     splatted with the filter).  Some pixels: each from its own samples, placed
-    with the filter's distribution (:mod:`.pixel_filter`).
+    with the filter's distribution (:mod:`.pixel_filter`).  ``sampler`` is
+    :func:`_develop_scalar`'s; the kernels clone the sensor's own.
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -448,7 +447,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf))
-    sums = _DEVELOP(scene, sensor, integrator, sampler, mi.Float(pixel_xy[:, 0]),
+    sums = _DEVELOP(scene, sensor, integrator, mi.Float(pixel_xy[:, 0]),
                     mi.Float(pixel_xy[:, 1]), mi.Float(table.cdf.astype(np.float32)),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), layout,
                     objects=(scene, sensor, integrator), record=replay)
@@ -460,15 +459,22 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     return _read_sums(sums, pixel_xy)
 
 
-def _develop_kernel(scene, sensor, integrator, sampler, pixel_x, pixel_y, cdf, seed, layout):
+def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layout):
     """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
     per pixel (a list of channels) or, for every pixel, as an image block's
     tensor.  Everything they depend on is an argument (``layout`` the Python
-    values), so that :func:`drjit.freeze` can record and replay them."""
+    values), so that :func:`drjit.freeze` can record and replay them.
+
+    The sampler is made here, not passed: a frozen function's inputs are
+    also its outputs, and the sampler's state after the samples would cost
+    a second kernel over every lane to write back.
+    """
     n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells = layout
     film = sensor.film()
     rfilter = film.rfilter()
     cell = 2.0 * radius / cells
+    sampler = sensor.sampler().clone()
+    sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
     owner = dr.arange(mi.UInt32, n * spp) // spp  # lanes pixel-major, as Mitsuba's own
@@ -579,7 +585,7 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     """Shape, visible lights and mirror chain of every pixel's centre ray."""
     n = len(pixel_xy)
     layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
-    mask, pointers, chain, normal = _IDS(scene, sensor, sampler, lights,
+    mask, pointers, chain, normal = _IDS(scene, sensor, lights,
                                          mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1]),
                                          layout, objects=(scene, sensor), record=replay)
     keys, indices = lookup
@@ -599,13 +605,13 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
             _path_ids(shape_index, steps, len(keys)), _to_numpy(normal, n))
 
 
-def _ids_kernel(scene, sensor, sampler, lights, pixel_x, pixel_y, layout):
+def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
     """The kernel of :func:`_ids_jit`: (visible-light mask, shape pointers,
     mirror chain, shading normal) of each pixel's centre ray, every input an
     argument as :func:`_develop_kernel`'s."""
     _, rule, mirrors, _ = layout
     position = mi.Point2f(pixel_x + 0.5, pixel_y + 0.5)
-    ray, _ = _camera_ray(sensor, sampler, position, 1, centre=True)
+    ray, _ = _camera_ray(sensor, None, position, 1, centre=True)  # no random numbers
     si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
     pointers = dr.reinterpret_array(mi.UInt32, si.shape)
     normal = dr.select(valid, si.sh_frame.n, 0.0)
