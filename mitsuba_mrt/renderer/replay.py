@@ -27,7 +27,9 @@ would be recorded for nothing.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+import sys
 from collections import OrderedDict
 from typing import Callable
 
@@ -37,10 +39,32 @@ import drjit as dr
 RECORDINGS = 8
 #: Traced object sets (scene, sensor, integrator) that keep their key: their
 #: objects are held, so that no other object can take over an identity (a
-#: freed object's ``id``) and be given its recordings.
+#: freed object's ``id``) and be given its recordings; a set whose scene
+#: nobody else holds any more is let go at the next trace.
 KEPT_OBJECTS = 4
 
 _tokens = itertools.count(1)
+#: Whether traces asked to may replay: the innermost :func:`replaying` block's.
+_replaying = [True]
+
+
+@contextlib.contextmanager
+def replaying(enabled: bool):
+    """Within the block, traces are recorded and replayed (``True``, as outside
+    any block) or always traced anew (``False``: to measure what replaying
+    saves, or to rule it out).
+
+    Examples
+    --------
+    >>> with replaying(False):
+    ...     _replaying[-1]
+    False
+    """
+    _replaying.append(bool(enabled))
+    try:
+        yield
+    finally:
+        _replaying.pop()
 
 
 class Replay:
@@ -67,7 +91,7 @@ class Replay:
         """``kernel(*args)``; with ``record``, from the recording for these
         ``objects`` (the Mitsuba objects among ``args``) and layout
         (``args[-1]``), made now if there is none."""
-        if not record:
+        if not (record and _replaying[-1]):
             return self.plain(*args)
         token = self._token(objects)
         if (token, args[-1]) in self._failed:
@@ -79,6 +103,7 @@ class Replay:
             return self.plain(*args)
 
     def _token(self, objects: tuple) -> int:
+        self._release_dropped()
         ids = tuple(id(o) for o in objects)
         held = self._objects.get(ids)
         if held is not None and all(a is b for a, b in zip(held[0], objects)):
@@ -89,3 +114,19 @@ class Replay:
         if len(self._objects) > KEPT_OBJECTS:
             self._objects.popitem(last=False)
         return token
+
+    def _release_dropped(self) -> None:
+        """Let go of the objects of scenes that only this table still holds.
+
+        A live Mitsuba object is a Dr.Jit instance that every later trace's
+        virtual calls go through (a render of one scene took 7x longer with
+        five other scenes alive), so a scene the caller has dropped must not
+        be kept; its token is never given again.
+        """
+        held_by_us: dict = {}
+        for objects, _ in self._objects.values():
+            held_by_us[id(objects[0])] = held_by_us.get(id(objects[0]), 0) + 1
+        for ids, (objects, _) in list(self._objects.items()):
+            # references: ours, this loop's ``objects`` and getrefcount's argument
+            if sys.getrefcount(objects[0]) <= held_by_us[id(objects[0])] + 2:
+                del self._objects[ids]

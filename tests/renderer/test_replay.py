@@ -74,3 +74,37 @@ def test_renders_replay_the_grid():
     results = [mitsuba_mrt.render(scene, mode="idpass", seed=1) for _ in range(3)]
     for result in results[1:]:
         np.testing.assert_array_equal(result.image, results[0].image)
+
+
+def test_replaying_false_traces_anew():
+    from mitsuba_mrt.renderer import trace
+    from mitsuba_mrt.renderer.replay import replaying
+
+    scene = mi.load_string(PATH_SCENE)
+    xy = grid_pattern(24, 24, 0.3).pixel_xy
+    before = trace._DEVELOP.frozen.n_recordings
+    with replaying(False):
+        _trace(scene, scene.integrator(), xy, True)
+    assert trace._DEVELOP.frozen.n_recordings == before
+    _trace(scene, scene.integrator(), xy, True)
+    assert trace._DEVELOP.frozen.n_recordings == before + 1
+
+
+def test_a_dropped_scene_is_let_go():
+    # a live scene's objects are Dr.Jit instances every later trace goes through
+    import gc
+
+    from mitsuba_mrt.renderer import trace
+
+    scene = mi.load_string(PATH_SCENE)
+    xy = grid_pattern(24, 24, 0.1).pixel_xy
+    _trace(scene, scene.integrator(), xy, True)
+    assert any(objects[0] is scene for objects, _ in trace._DEVELOP._objects.values())
+    dropped = id(scene)
+    del scene
+    gc.collect()
+    other = mi.load_string(PATH_SCENE)
+    _trace(other, other.integrator(), xy, True)
+    held = [objects[0] for objects, _ in trace._DEVELOP._objects.values()]
+    assert any(o is other for o in held)
+    assert all(o is other for o in held if id(o) == dropped)  # (other may reuse its id)
