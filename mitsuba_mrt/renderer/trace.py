@@ -518,9 +518,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
     # Evaluate once: each reduction below would otherwise re-run the integrator.
     dr.eval(values)
     if every:
-        block = mi.ImageBlock(size=mi.ScalarVector2u(width, height),
-                              offset=mi.ScalarPoint2i(crop_offset), channel_count=_CHANNELS,
-                              rfilter=rfilter, border=False)
+        block = _new_block(film)
         block.put(position + mi.ScalarVector2f(crop_offset), values, active)
         return block.tensor()
     sums = [dr.block_sum(value, spp) for value in values]
