@@ -37,13 +37,15 @@ import drjit as dr
 
 #: Recordings kept per kernel function (least recently used dropped first).
 RECORDINGS = 8
-#: Traced object sets (scene, sensor, integrator) that keep their key: their
-#: objects are held, so that no other object can take over an identity (a
-#: freed object's ``id``) and be given its recordings; a set whose scene
-#: nobody else holds any more is let go at the next trace.
-KEPT_OBJECTS = 4
+#: Traced object sets ((scene, sensor, integrator), (scene, sensor)) that keep
+#: their token: their objects are held, so that no other object can take over
+#: an identity (a freed object's ``id``) and be given their recordings; a set
+#: whose scene nobody else holds any more is let go at the next trace.
+KEPT_OBJECTS = 8
 
 _tokens = itertools.count(1)
+#: id tuple -> (the objects, held; their token), least recently used first.
+_held: OrderedDict = OrderedDict()
 #: Whether traces asked to may replay: the innermost :func:`replaying` block's.
 _replaying = [True]
 
@@ -84,7 +86,6 @@ class Replay:
 
         self.plain = kernel  # traced on each call
         self.frozen = dr.freeze(recorded, limit=RECORDINGS, warn_after=1 << 30)
-        self._objects: OrderedDict = OrderedDict()  # id tuple -> (objects held, token)
         self._failed: set = set()  # (token, layout) that Dr.Jit could not record
 
     def __call__(self, *args, objects: tuple, record: bool):
@@ -93,7 +94,7 @@ class Replay:
         (``args[-1]``), made now if there is none."""
         if not (record and _replaying[-1]):
             return self.plain(*args)
-        token = self._token(objects)
+        token = _token(objects)
         if (token, args[-1]) in self._failed:
             return self.plain(*args)
         try:
@@ -102,31 +103,35 @@ class Replay:
             self._failed.add((token, args[-1]))
             return self.plain(*args)
 
-    def _token(self, objects: tuple) -> int:
-        self._release_dropped()
-        ids = tuple(id(o) for o in objects)
-        held = self._objects.get(ids)
-        if held is not None and all(a is b for a, b in zip(held[0], objects)):
-            self._objects.move_to_end(ids)
-            return held[1]
-        token = next(_tokens)  # never reused: a new object never meets an old recording
-        self._objects[ids] = (objects, token)
-        if len(self._objects) > KEPT_OBJECTS:
-            self._objects.popitem(last=False)
-        return token
 
-    def _release_dropped(self) -> None:
-        """Let go of the objects of scenes that only this table still holds.
+def _token(objects: tuple) -> int:
+    """The token of these Mitsuba objects: the same while they live, never
+    given to others."""
+    _release_dropped()
+    ids = tuple(id(o) for o in objects)
+    held = _held.get(ids)
+    if held is not None:  # held, so these very objects: no other can have their ids
+        _held.move_to_end(ids)
+        return held[1]
+    token = next(_tokens)
+    _held[ids] = (objects, token)
+    if len(_held) > KEPT_OBJECTS:
+        _held.popitem(last=False)
+    return token
 
-        A live Mitsuba object is a Dr.Jit instance that every later trace's
-        virtual calls go through (a render of one scene took 7x longer with
-        five other scenes alive), so a scene the caller has dropped must not
-        be kept; its token is never given again.
-        """
-        held_by_us: dict = {}
-        for objects, _ in self._objects.values():
-            held_by_us[id(objects[0])] = held_by_us.get(id(objects[0]), 0) + 1
-        for ids, (objects, _) in list(self._objects.items()):
-            # references: ours, this loop's ``objects`` and getrefcount's argument
-            if sys.getrefcount(objects[0]) <= held_by_us[id(objects[0])] + 2:
-                del self._objects[ids]
+
+def _release_dropped() -> None:
+    """Let go of the objects of scenes that only this table still holds.
+
+    A live Mitsuba object is a Dr.Jit instance that every later trace's
+    virtual calls go through (a render of one scene took 7x longer with five
+    other scenes alive), so a scene the caller has dropped must not be kept;
+    its token is never given again.
+    """
+    ours: dict = {}
+    for objects, _ in _held.values():
+        ours[id(objects[0])] = ours.get(id(objects[0]), 0) + 1
+    for ids, (objects, _) in list(_held.items()):
+        # references to the scene: ours and getrefcount's argument, nobody else's
+        if sys.getrefcount(objects[0]) <= ours[id(objects[0])] + 1:
+            del _held[ids]

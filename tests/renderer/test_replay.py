@@ -90,21 +90,25 @@ def test_replaying_false_traces_anew():
     assert trace._DEVELOP.frozen.n_recordings == before + 1
 
 
-def test_a_dropped_scene_is_let_go():
+def test_a_dropped_scene_is_let_go_and_a_held_one_kept():
     # a live scene's objects are Dr.Jit instances every later trace goes through
     import gc
 
-    from mitsuba_mrt.renderer import trace
+    from mitsuba_mrt.renderer import replay
 
-    scene = mi.load_string(PATH_SCENE)
+    def held():
+        return [objects[0] for objects, _ in replay._held.values()]
+
+    scene, kept = mi.load_string(PATH_SCENE), mi.load_string(PATH_SCENE)
     xy = grid_pattern(24, 24, 0.1).pixel_xy
+    _trace(kept, kept.integrator(), xy, True)
     _trace(scene, scene.integrator(), xy, True)
-    assert any(objects[0] is scene for objects, _ in trace._DEVELOP._objects.values())
+    assert any(o is scene for o in held()) and any(o is kept for o in held())
     dropped = id(scene)
     del scene
     gc.collect()
     other = mi.load_string(PATH_SCENE)
     _trace(other, other.integrator(), xy, True)
-    held = [objects[0] for objects, _ in trace._DEVELOP._objects.values()]
-    assert any(o is other for o in held)
-    assert all(o is other for o in held if id(o) == dropped)  # (other may reuse its id)
+    assert any(o is other for o in held())
+    assert any(o is kept for o in held())  # its caller still holds it
+    assert all(o is other for o in held() if id(o) == dropped)  # (other may reuse its id)
