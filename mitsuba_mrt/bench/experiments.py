@@ -36,6 +36,14 @@ BASELINES = ("nearest", "bicubic")
 
 FULL = "full"
 EQUAL_TIME = "full-equal-time"
+#: At a stochastic point of the other experiments, each method is also set
+#: against the full render denoised by OIDN at the spp whose total (aux
+#: render and denoising included) is closest to the method's: with the
+#: albedo and normal guides, and without them.
+OIDN_EQUAL_TIME = "oidn-equal-time"
+OIDN_NOAUX_EQUAL_TIME = "oidn-noaux-equal-time"
+#: The rows that repeat another method's time (``matched_method``).
+EQUAL_TIME_BASELINES = (EQUAL_TIME, OIDN_EQUAL_TIME, OIDN_NOAUX_EQUAL_TIME)
 
 #: ``auto`` runs a pilot and may render in full, so it is compared on request
 #: (``--methods auto``) rather than by default.
@@ -73,6 +81,9 @@ DENOISE_METHODS = ("mrt-paper", "mrt-fast", "mrt-refine", "mrt-idpass")
 OIDN = "oidn"
 OIDN_NOAUX = "oidn-noaux"
 OIDN_QUALITIES = ("fast", "balanced")
+#: OIDN's quality in the other experiments' ``oidn`` baselines: the cheap
+#: one, as the MRT's own ``denoise`` stage uses.
+OIDN_BASELINE_QUALITY = "fast"
 
 #: The MRT's method name with ``denoise="oidn"``: ``mrt-fast+oidn``.
 DENOISED_SUFFIX = "+oidn"

@@ -19,7 +19,12 @@ scene is loaded once, and :class:`PointRunner` then
    caches it, ``spp`` being the reference's), and
 4. times the *full render at other spp* (1, 4, 16 ...), for the
    ``full-equal-time`` row of every method: the full render at the spp whose
-   median time is closest to that method's;
+   median time is closest to that method's; and each of those renders
+   *denoised by OIDN* (quality :data:`~.experiments.OIDN_BASELINE_QUALITY`),
+   with the albedo and normal of Mitsuba's ``aov`` integrator at 1 spp and
+   without them, the aux render and the denoising timed into its total, for
+   the ``oidn-equal-time`` and ``oidn-noaux-equal-time`` rows (none, with a
+   warning, where pyoidn is not installed);
 5. writes one :class:`MethodRow` per method and setting: the lower median of
    its totals, with the stage times of that same run, and the errors and
    lowest pixel value of its image.
@@ -45,7 +50,8 @@ from pathlib import Path
 import numpy as np
 
 from ..app.imageio import atomic_path
-from .experiments import (DENOISED_SUFFIX, EQUAL_TIME, FULL, OIDN, OIDN_NOAUX, OIDN_QUALITIES,
+from .experiments import (DENOISED_SUFFIX, EQUAL_TIME, FULL, OIDN, OIDN_BASELINE_QUALITY,
+                          OIDN_EQUAL_TIME, OIDN_NOAUX, OIDN_NOAUX_EQUAL_TIME, OIDN_QUALITIES,
                           Experiment, Point, Setting, available_methods)
 
 #: Timed seconds of the full render below which a point gets more rounds.
@@ -324,6 +330,7 @@ class PointRunner:
         stochastic = self._is_stochastic()
         self.converged = self._converged_reference() if stochastic else None
         candidates = self._full_at_other_spp() if stochastic else {self.point.spp: self.full}
+        self.denoised = self._denoised(candidates) if stochastic else {}
         self.tick()
         rows = self._rows(rounds, stochastic, candidates)
         for (s, m), status in self.failed.items():
@@ -464,9 +471,49 @@ class PointRunner:
             spp *= 4
         return candidates
 
+    def _denoised(self, candidates: dict) -> dict:
+        """{method: {spp: Runs}}: every candidate full render denoised by OIDN, as
+        ``oidn`` (with the ``aov`` guides) and ``oidn-noaux``; {} without pyoidn.
+
+        A run's total is the render's median total plus the denoising (and,
+        with guides, the 1-spp aux render's median); each is timed
+        ``repeats`` times after a first, untimed call of each.
+        """
+        from ..errors import MRTError
+        from ..recon.denoise import denoise_image
+        from ..renderer.guides import render_guides
+
+        try:
+            render_guides(self.scene)  # first calls: the aux kernel, OIDN's filters
+            aux_runs = [render_guides(self.scene) for _ in range(max(self.repeats, 1))]
+            aux_s = float(np.median([s for _, _, s in aux_runs]))
+            albedo, normal, _ = aux_runs[-1]
+            kinds = {OIDN: (albedo, normal), OIDN_NOAUX: (None, None)}
+            for guides in kinds.values():
+                denoise_image(self.full.image, *guides, quality=OIDN_BASELINE_QUALITY)
+        except MRTError as exc:  # pyoidn missing or not loading: no OIDN rows
+            print(f"warning: no {OIDN} baselines at {self.point.scene}: {exc}", file=sys.stderr)
+            return {}
+        out = {}
+        for method, guides in kinds.items():
+            out[method] = {}
+            for spp, cand in sorted(candidates.items()):
+                full = cand.median()
+                runs = Runs(spp=spp, traced=cand.traced or self.width * self.height)
+                for _ in range(max(self.repeats, 1)):
+                    begin = time.perf_counter()
+                    image = denoise_image(cand.image, *guides, quality=OIDN_BASELINE_QUALITY)
+                    seconds = time.perf_counter() - begin + (aux_s if guides[0] is not None
+                                                             else 0.0)
+                    runs.add(image, Run(Stages(full.total, 0.0, 0.0, full.total + seconds,
+                                               seconds), full.memory))
+                out[method][spp] = runs
+        return out
+
     def _rows(self, rounds: int, stochastic: bool, candidates: dict) -> list:
         """Rows: the full render (at every spp tried, if asked), then every method,
-        each followed by the full render at equal time when the point is stochastic."""
+        each followed by the full render and the OIDN baselines at equal time when
+        the point is stochastic."""
         point, exp = self.point, self.exp
         base = MethodRow(experiment=exp.name, scene=point.scene, x_name=exp.x_name,
                          integrator=point.integrator, defines=point.defines_text,
@@ -485,6 +532,11 @@ class PointRunner:
                 if spp != point.spp:
                     rows.append(self._row(base, FULL, None, cand,
                                           Setting({}, math.nan, f"spp={spp}", point.group)))
+            for method, by_spp in self.denoised.items():
+                for spp, runs in by_spp.items():
+                    label = f"spp={spp}, quality={OIDN_BASELINE_QUALITY}"
+                    rows.append(self._row(base, method, None, runs,
+                                          Setting({}, math.nan, label, point.group)))
         for (s, m), r in self.runs.items():
             setting = point.settings[s]
             if (s, m) in self.failed:
@@ -494,10 +546,13 @@ class PointRunner:
             rows.append(self._row(base, m, self.modes[m], r, setting))
             if stochastic and rows[-1].ok:
                 t = rows[-1].total_s
-                spp = min(candidates, key=lambda c: abs(math.log(
-                    candidates[c].median().total / t)))
-                rows.append(self._row(base, EQUAL_TIME, None, candidates[spp], setting,
-                                      matched_method=m))
+                for name, pool in ((EQUAL_TIME, candidates),
+                                   (OIDN_EQUAL_TIME, self.denoised.get(OIDN, {})),
+                                   (OIDN_NOAUX_EQUAL_TIME, self.denoised.get(OIDN_NOAUX, {}))):
+                    if pool:
+                        spp = min(pool, key=lambda c: abs(math.log(pool[c].median().total / t)))
+                        rows.append(self._row(base, name, None, pool[spp], setting,
+                                              matched_method=m))
         return rows
 
     def _row(self, base: MethodRow, method: str, mode, runs: Runs, setting: Setting,

@@ -30,8 +30,8 @@ from dataclasses import asdict, fields
 import numpy as np
 
 from ..app.imageio import atomic_path, srgb_encode
-from .experiments import (BASELINES, DENOISED_SUFFIX, EQUAL_TIME, FULL, OIDN, OIDN_NOAUX,
-                          Experiment)
+from .experiments import (BASELINES, DENOISED_SUFFIX, EQUAL_TIME_BASELINES, FULL, OIDN,
+                          OIDN_NOAUX, Experiment)
 from .measure import CONVERGED_FACTOR, NOISE_FREE, MethodRow
 
 #: Columns of every CSV, in order: the fields of :class:`MethodRow`.
@@ -98,7 +98,7 @@ def _series(rows, experiment_name):
     groups = sorted({r["group"] for r in rows if r["method"] != FULL}, key=_group_key)
     for r in rows:
         m = r["method"]
-        if m in (FULL, EQUAL_TIME) or not math.isfinite(_num(r["x"])):
+        if m in (FULL, *EQUAL_TIME_BASELINES) or not math.isfinite(_num(r["x"])):
             continue
         if m in BASELINES and groups and r["group"] != groups[0]:
             continue
@@ -204,18 +204,23 @@ def plot_tradeoff(rows, path, experiment: Experiment) -> None:
     groups = list(dict.fromkeys(r["group"] for r in rows))
     fig = _figure(4.6 * max(len(groups), 1), 3.8)
     axes = np.atleast_1d(fig.subplots(1, max(len(groups), 1)))
-    methods = list(dict.fromkeys(r["method"] for r in rows
-                                 if r["method"] not in (FULL, EQUAL_TIME)))
+    methods = list(dict.fromkeys(r["method"] for r in rows if r["method"] not in (
+        FULL, OIDN, OIDN_NOAUX, *EQUAL_TIME_BASELINES)))
     markers = "osD^v<>ph*"
     for ax, group in zip(axes, groups):
         grows = [r for r in rows if r["group"] == group]
-        full = sorted([r for r in grows if r["method"] == FULL], key=lambda r: _num(r["total_s"]))
-        errs = [_error_of(r) for r in full]
-        if full and all(e > 0 for e in errs):
-            ax.plot([_num(r["total_s"]) for r in full], errs, "k-o", ms=4, label="full (spp)")
-            for r, e in zip(full, errs):
+        for name, style in ((FULL, "k-o"), (OIDN, "k--s"), (OIDN_NOAUX, "k:^")):
+            spp_curve = sorted([r for r in grows if r["method"] == name],
+                               key=lambda r: _num(r["total_s"]))
+            errs = [_error_of(r) for r in spp_curve]
+            if not (spp_curve and all(e > 0 for e in errs)):
+                continue
+            ax.plot([_num(r["total_s"]) for r in spp_curve], errs, style, ms=4,
+                    mfc="none" if name != FULL else None, label=f"{name} (spp)")
+            for r, e in zip(spp_curve if name == FULL else [], errs):
                 ax.annotate(f"{r['spp']} spp", (_num(r["total_s"]), e), fontsize=6,
                             xytext=(3, 3), textcoords="offset points")
+        full = [r for r in grows if r["method"] == FULL]
         for r in full:
             if _error_of(r) <= 0:
                 ax.axvline(_num(r["total_s"]), color="k", ls="--", lw=1,
@@ -306,7 +311,7 @@ def _tradeoff_table(ok, experiment: Experiment) -> list:
     out.append("|" + " --- |" * len(head))
     for r in ok:
         label = r["setting"] + (f" (time of {r['matched_method']})"
-                                if r["method"] == EQUAL_TIME else "")
+                                if r["method"] in EQUAL_TIME_BASELINES else "")
         cells = [r["group"], r["method"], label, r["spp"], _md_number(r["total_s"]),
                  _md_number(r["relative_time"], 3), _md_number(r["error"])]
         cells += ([_md_number(r["error_converged"]), _md_number(r["psnr_converged_db"], 4)]
@@ -348,7 +353,7 @@ def _sweep_tables(ok, experiment: Experiment) -> list:
                 _md_number(full[x]["total_s"], digits) if x in full else "-" for x in xs)
                 + " |")
         out.append("")
-    warm = [r for r in ok if r["method"] != EQUAL_TIME]
+    warm = [r for r in ok if r["method"] not in EQUAL_TIME_BASELINES]
     if warm:
         first_scene = warm[0].get("scene"), warm[0].get("defines")
         seen = {}
@@ -375,7 +380,7 @@ def _gallery_table(ok, experiment: Experiment) -> list:
     out.append("| --- | --- |" + " ---: |" * (len(head) - 2))
     for r in ok:
         method = r["method"] + (f" (time of {r['matched_method']})"
-                                if r["method"] == EQUAL_TIME else "")
+                                if r["method"] in EQUAL_TIME_BASELINES else "")
         cells = [r["group"], method, r["spp"], _md_number(r["relative_time"], 3),
                  _md_number(_error_of(r)), _md_number(_psnr_of(r), 4),
                  _md_number(r.get("min_value"), 3)]
@@ -387,7 +392,8 @@ def _gallery_table(ok, experiment: Experiment) -> list:
         if not full or not _num(full[0].get("min_value")) >= 0:
             continue
         below = [f"{r['method']} ({_md_number(r['min_value'], 3)})" for r in rows
-                 if r["method"] not in (FULL, EQUAL_TIME) and _num(r.get("min_value")) < 0]
+                 if r["method"] not in (FULL, *EQUAL_TIME_BASELINES)
+                 and _num(r.get("min_value")) < 0]
         if below:
             negative.append(f"{scene}: " + ", ".join(below))
     out += ["", "Pixels below 0 where the full render has none: "

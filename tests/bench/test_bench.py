@@ -1,5 +1,6 @@
 """``bench``: a quick experiment end to end, the method names, the plots (headless), errors."""
 
+import importlib.util
 import math
 import sys
 
@@ -12,6 +13,10 @@ from mitsuba_mrt.modes import MODES
 from mitsuba_mrt.modes.paper import paper_reconstruct
 
 from conftest import SCENES
+
+#: The OIDN baselines' rows, where pyoidn is installed (run.py installs it).
+OIDN_ROWS = ({"oidn-equal-time", "oidn-noaux-equal-time"}
+             if importlib.util.find_spec("pyoidn") else set())
 
 #: The columns the issue asks for, by their CSV names.
 REQUIRED = ("experiment", "scene", "method", "sample_fraction", "filter_sigma", "filter_cutoff",
@@ -73,10 +78,46 @@ def test_quick_tradeoff_reports_converged_and_equal_time(tmp_path):
     assert all(r["stochastic"] == "false" for r in matte_rows)
     for r in path_rows:
         assert math.isfinite(float(r["error_converged"])) and int(r["converged_spp"]) == 64
-    equal = [r for r in path_rows if r["method"] == "full-equal-time"]
-    assert {r["matched_method"] for r in equal} == {"mrt-paper", "nearest"}
+    for name in ("full-equal-time", *OIDN_ROWS):
+        equal = [r for r in path_rows if r["method"] == name]
+        assert {r["matched_method"] for r in equal} == {"mrt-paper", "nearest"}, name
     assert {r["method"] for r in matte_rows} == {"full", "mrt-paper", "nearest"}
     assert (tmp_path / "tradeoff.png").is_file() and (tmp_path / "tradeoff_triptych.png").is_file()
+    if not OIDN_ROWS:
+        return
+    # the full render at each spp, denoised: its time is that render's and the denoiser's
+    full = {r["spp"]: float(r["total_s"]) for r in path_rows if r["method"] == "full"}
+    for name in ("oidn", "oidn-noaux"):
+        denoised = {r["spp"]: r for r in path_rows if r["method"] == name}
+        assert set(denoised) == set(full), name
+        for spp, r in denoised.items():
+            assert r["status"] == "ok" and r["setting"] == f"spp={spp}, quality=fast"
+            assert float(r["total_s"]) > full[spp]
+            assert math.isfinite(float(r["error_converged"]))
+    for r in path_rows:
+        if r["method"] in OIDN_ROWS:  # the same spp's run as the oidn row, at equal time
+            same = next(o for o in path_rows if o["method"] == r["method"].removesuffix(
+                "-equal-time") and o["spp"] == r["spp"])
+            assert (r["total_s"], r["error_converged"]) == (same["total_s"],
+                                                            same["error_converged"])
+
+
+def test_without_pyoidn_the_oidn_baselines_are_left_out_with_a_warning(tmp_path, monkeypatch,
+                                                                        capsys):
+    from mitsuba_mrt.recon import denoise
+
+    def missing():
+        raise MRTError(denoise.MISSING)
+
+    monkeypatch.setattr(denoise, "_pyoidn", missing)
+    rows = run_experiment("tradeoff", tmp_path, quick=True, progress=False, methods="nearest",
+                          res=16, scenes_dir=SCENES)["tradeoff"].rows
+    assert not {r["method"] for r in rows} & {"oidn", "oidn-noaux", "oidn-equal-time",
+                                               "oidn-noaux-equal-time"}
+    assert "full-equal-time" in {r["method"] for r in rows}
+    warning = capsys.readouterr().err
+    assert "warning: no oidn baselines at paper_fig1.xml" in warning
+    assert "mitsuba-mrt[denoise]" in warning
 
 
 def test_method_names_follow_modes_at_run_time(monkeypatch):
@@ -210,10 +251,11 @@ def test_quick_gallery_has_every_method_and_reuses_the_converged_reference(tmp_p
     assert tuple(rows[0]) == report.CSV_COLUMNS and "min_value" in rows[0]
     for scene in scenes:
         mine = [r for r in rows if r["scene"] == f"gallery/{scene}.xml"]
-        assert {r["method"] for r in mine} == {"full", "full-equal-time",
+        assert {r["method"] for r in mine} == {"full", "full-equal-time", *OIDN_ROWS,
                                                *experiments.GALLERY_METHODS}
-        assert {r["matched_method"] for r in mine if r["method"] == "full-equal-time"} == set(
-            experiments.GALLERY_METHODS)
+        for name in ("full-equal-time", *OIDN_ROWS):
+            assert {r["matched_method"] for r in mine if r["method"] == name} == set(
+                experiments.GALLERY_METHODS)
         for r in mine:
             assert r["status"] == "ok", (scene, r["method"], r["status"])
             assert r["stochastic"] == "true" and int(r["converged_spp"]) == 64
@@ -238,7 +280,7 @@ def test_quick_gallery_has_every_method_and_reuses_the_converged_reference(tmp_p
     monkeypatch.setattr(measure.PointRunner, "_render_converged", render_again)
     assert main(argv + ["--methods", "bicubic"]) == 0
     rerun = report.read_csv(tmp_path / "gallery.csv")
-    assert {r["method"] for r in rerun} == {"full", "bicubic", "full-equal-time"}
+    assert {r["method"] for r in rerun} == {"full", "bicubic", "full-equal-time", *OIDN_ROWS}
     assert all(math.isfinite(float(r["error_converged"])) for r in rerun)
     assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "cache").iterdir()} == cached
 
