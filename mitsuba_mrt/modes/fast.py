@@ -15,8 +15,6 @@ from __future__ import annotations
 import time
 from collections import Counter
 
-import numpy as np
-
 from ..recon.edges import geometric_order, region_boxes, smooth_ids
 from ..recon.ids import rank_ids
 from ..recon.sampling import SamplePattern
@@ -36,6 +34,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
 
     Examples
     --------
+    >>> import numpy as np
     >>> from mitsuba_mrt.recon.sampling import grid_pattern
     >>> p = grid_pattern(24, 24, 0.12)
     >>> x = p.pixel_xy[:, :1].astype(float) ** 2
