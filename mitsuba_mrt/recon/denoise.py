@@ -3,7 +3,9 @@
 :func:`denoise_grid` is the ``denoise="oidn"`` stage: the grid's pixels
 form a small image (grid rows x grid columns), which OIDN's ``RT`` filter
 denoises as an HDR image with the trace's albedo and shading normals (those
-of the grid pixels themselves) as guides, before the reconstruction.
+of the grid pixels themselves) as guides, before the reconstruction.  On a
+textured diffuse surface (:func:`textured_pixels`) it denoises the shading
+instead, the radiance divided by the albedo, and multiplies the albedo back.
 :func:`denoise_image` is the same filter on any image (the bench's ``oidn``
 baseline denoises full renders with it).
 
@@ -21,6 +23,7 @@ import threading
 import numpy as np
 
 from ..errors import MRTError
+from .compose import safe_albedo
 
 #: OIDN's quality presets, fastest first.
 QUALITIES = ("fast", "balanced", "high")
@@ -29,6 +32,13 @@ QUALITIES = ("fast", "balanced", "high")
 #: 0.85 of ``balanced``'s time on the grid of a 400 x 400 image, for an MRT error
 #: about 5 % higher; at few spp time buys more (docs/BENCHMARKS.md, Denoising).
 GRID_QUALITY = "fast"
+
+#: A diffuse surface is textured where its grid pixels' albedo (mean over
+#: RGB) spans more than this ratio, 95th over 5th percentile: a single
+#: colour's pixels span at most ~1.2 (those that straddle another shape).
+TEXTURE_CONTRAST = 1.5
+#: Fewest grid pixels of a surface for its albedo's spread to say anything.
+TEXTURE_MIN_PIXELS = 8
 
 MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
            "pip install mitsuba-mrt[denoise]")
@@ -120,14 +130,75 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     return output.astype(np.float64)
 
 
+def textured_pixels(shape_index: np.ndarray, albedo: np.ndarray,
+                    diffuse: np.ndarray) -> np.ndarray:
+    """Which traced pixels lie on a textured diffuse surface.
+
+    A diffuse BSDF's albedo is its reflectance at the hit, with no noise, so
+    where one surface's pixels disagree on it (by more than
+    :data:`TEXTURE_CONTRAST`), the surface is textured: its radiance is the
+    texture times a smooth shading.  Denoising that radiance on the sparse
+    grid smooths the texture's fine detail with the noise, and dividing by a
+    dark texel's albedo afterwards magnifies what was smoothed.
+
+    Parameters
+    ----------
+    shape_index : ndarray of int, shape (n,)
+        Each pixel's shape (1-based, 0: none), as the trace gives it.
+    albedo : ndarray, shape (n, 3)
+    diffuse : ndarray of bool, shape (shapes + 1,)
+        Per shape index, whether its BSDF is purely diffuse (entry 0 unused).
+
+    Examples
+    --------
+    >>> ids = np.array([1] * 10 + [2] * 10)
+    >>> albedo = np.repeat([[0.05], [0.8]] * 5 + [[0.5]] * 10, 3, axis=1)
+    >>> textured_pixels(ids, albedo, np.array([False, True, True])).tolist() == [True] * 10 + [False] * 10
+    True
+    """
+    shape_index = np.asarray(shape_index)
+    out = np.zeros(len(shape_index), dtype=bool)
+    level = np.asarray(albedo, dtype=np.float64).mean(axis=-1)
+    for index in np.unique(shape_index[shape_index > 0]):
+        if index >= len(diffuse) or not diffuse[index]:
+            continue
+        mine = shape_index == index
+        lit = level[mine & (level > 0)]
+        if len(lit) < TEXTURE_MIN_PIXELS:
+            continue
+        low, high = np.percentile(lit, [5, 95])
+        if high > TEXTURE_CONTRAST * low:
+            out |= mine
+    return out
+
+
 def denoise_grid(radiance: np.ndarray, albedo: np.ndarray | None = None,
                  normal: np.ndarray | None = None, denoiser: str = "oidn",
-                 quality: str | None = None) -> np.ndarray:
+                 quality: str | None = None, textured: np.ndarray | None = None,
+                 exact: np.ndarray | None = None) -> np.ndarray:
     """The grid image ``radiance`` (rows, columns, 3), denoised with its guides.
 
     ``albedo`` and ``normal`` are the grid pixels' own (the trace's, 0 where
     the pixel centre sees no surface). Only ``denoiser="oidn"`` exists; the
     public boundary (:class:`~mitsuba_mrt.types.MRTParams`) has checked it.
-    ``quality``: default :data:`GRID_QUALITY`.
+    ``quality``: default :data:`GRID_QUALITY`.  ``textured`` (rows, columns)
+    marks the pixels on textured diffuse surfaces (:func:`textured_pixels`):
+    theirs is the denoised shading, ``radiance / albedo`` denoised with a
+    flat albedo guide, times their albedo (a second OIDN call, only where
+    some pixel is marked).  ``exact`` (rows, columns) marks the pixels whose
+    samples all agreed (a constant background, an emitter seen directly):
+    they keep their values, which a denoiser can only blur.
     """
-    return denoise_image(radiance, albedo, normal, quality or GRID_QUALITY)
+    quality = quality or GRID_QUALITY
+    out = denoise_image(radiance, albedo, normal, quality)
+    if textured is not None and albedo is not None and np.any(textured):
+        textured = np.asarray(textured, dtype=bool)
+        safe = safe_albedo(albedo)
+        surface = (np.asarray(albedo) > 0).any(axis=-1) | textured
+        flat = np.repeat(surface[..., None].astype(np.float64), 3, axis=-1)
+        shading = denoise_image(np.asarray(radiance, dtype=np.float64) / safe, flat, normal,
+                                quality)
+        out = np.where(textured[..., None], shading * safe, out)
+    if exact is not None:
+        out = np.where(np.asarray(exact, dtype=bool)[..., None], radiance, out)
+    return out

@@ -24,10 +24,10 @@ from ..recon.sampling import SamplePattern, grid_pattern
 from ..types import (MRTParams, SeedStream, Skips, SparseTrace, Timings, TracedCounts,
                      check_radiance)
 from ..recon.compose import region_values
-from ..recon.denoise import denoise_grid
+from ..recon.denoise import denoise_grid, textured_pixels
 from . import auto
 from .scene import resolve_sensor, unwrap
-from .trace import is_jit, trace_pixels
+from .trace import diffuse_shapes, is_jit, trace_pixels
 
 
 @dataclass
@@ -164,7 +164,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     timings.trace = trace.seconds
     if params.denoise != "none":
         begin = time.perf_counter()
-        trace = _denoised(pattern, trace, params.denoise)
+        trace = _denoised(scene, pattern, trace, params.denoise)
         timings.denoise = time.perf_counter() - begin
 
     recon = reconstruct(pattern, trace, params, used, tracer)
@@ -188,12 +188,23 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
                      skips, dict(recon.stats), decision, traced, alpha)
 
 
-def _denoised(pattern: SamplePattern, trace: SparseTrace, denoiser: str) -> SparseTrace:
-    """``trace`` with its radiance denoised as the grid image it forms."""
+def _denoised(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
+              denoiser: str) -> SparseTrace:
+    """``trace`` with its radiance denoised as the grid image it forms, the
+    shading alone on textured diffuse surfaces, and the pixels whose samples
+    all agreed kept: the background's, and a surface's if not black (all of
+    its samples may have missed the light); at 1 spp none can tell."""
     grid = pattern.grid_shape + (3,)
     normal = None if trace.normal is None else trace.normal.reshape(grid)
+    textured = textured_pixels(trace.shape_index, trace.albedo, diffuse_shapes(scene))
+    exact = None
+    if trace.variance is not None and trace.spp > 1:
+        exact = ((trace.variance == 0.0).all(axis=1)
+                 & ((trace.radiance > 0.0).any(axis=1) | (trace.shape_index == 0)))
+        exact = exact.reshape(pattern.grid_shape)
     radiance = denoise_grid(trace.radiance.reshape(grid), trace.albedo.reshape(grid), normal,
-                            denoiser)
+                            denoiser, textured=textured.reshape(pattern.grid_shape),
+                            exact=exact)
     return replace(trace, radiance=np.asarray(radiance, dtype=np.float64).reshape(-1, 3))
 
 

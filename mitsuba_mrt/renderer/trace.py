@@ -273,6 +273,20 @@ def _natural_key(text: str):
     return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", text)]
 
 
+def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
+    """Per shape index (1-based, as in :func:`ordered_shapes`; entry 0 for no
+    shape), whether the shape's BSDF is purely diffuse: its albedo is then
+    its reflectance at the hit, exact for every sample."""
+    other = (mi.BSDFFlags.Glossy, mi.BSDFFlags.Delta, mi.BSDFFlags.Transmission)
+    out = [False]
+    for shape in ordered_shapes(scene):
+        bsdf = shape.bsdf()
+        flags = int(bsdf.flags()) if bsdf is not None else 0
+        out.append(mi.has_flag(flags, mi.BSDFFlags.DiffuseReflection)
+                   and not any(mi.has_flag(flags, f) for f in other))
+    return np.array(out, dtype=bool)
+
+
 def ordered_shapes(scene: mi.Scene) -> list:
     """The scene's shapes in id order (natural sort of ``shape.id()``).
 

@@ -89,3 +89,65 @@ def test_render_with_denoise_times_the_stage(oidn, variant):
     assert np.isfinite(result.image).all()
     # the grid the reconstruction saw is the denoised one
     assert not np.allclose(result.trace.radiance, plain.trace.radiance)
+
+
+def test_textured_pixels_are_the_diffuse_surfaces_whose_albedo_varies():
+    ids = np.repeat([1, 2, 3, 4], 12)
+    level = np.concatenate([np.tile([0.03, 0.8], 6),    # 1: a diffuse checker
+                            np.full(12, 0.5),            # 2: diffuse, one colour
+                            np.tile([0.1, 0.9], 6),      # 3: a mirror seeing a checker
+                            np.tile([0.03, 0.8], 6)])    # 4: a checker, too few pixels below
+    albedo = np.repeat(level[:, None], 3, axis=1)
+    diffuse = np.array([False, True, True, False, True])
+    out = denoise.textured_pixels(ids, albedo, diffuse)
+    assert out[:12].all() and not out[12:36].any() and out[36:].all()
+    few = ids.copy()
+    few[40:] = 0  # shape 4 keeps 4 pixels: too few to tell a texture
+    assert not denoise.textured_pixels(few, albedo, diffuse)[36:].any()
+    # no pixel lit, or an index beyond the table: not textured
+    assert not denoise.textured_pixels(ids, np.zeros_like(albedo), diffuse).any()
+    assert not denoise.textured_pixels(ids + 10, albedo, diffuse).any()
+
+
+def test_a_fine_dark_texture_is_denoised_as_shading_times_albedo(oidn):
+    # a sparse grid sees a checker of near-black and white texels as a pattern
+    # finer than any the denoiser keeps: denoised as radiance, a dark texel takes
+    # some of its bright neighbours' light; as shading, nothing is mixed
+    rng = np.random.default_rng(4)
+    y, x = np.mgrid[0:40, 0:40]
+    texture = np.where((x + y) % 2 == 0, 0.02, 0.8)
+    albedo = np.repeat(texture[..., None], 3, axis=-1)
+    shading = (0.6 + 0.3 * np.sin(x / 9.0 + y / 13.0))[..., None]
+    clean = albedo * shading
+    noisy = np.clip(clean * (1 + rng.normal(0, 0.3, clean.shape)), 0, None)
+    _, normal = _guides(clean.shape)
+    dark = texture < 0.1
+
+    def shading_error(image):
+        return np.abs(image / albedo - shading)[dark].mean()
+
+    plain = denoise_grid(noisy, albedo, normal)
+    textured = denoise_grid(noisy, albedo, normal, textured=np.ones(texture.shape, bool))
+    assert shading_error(textured) < 0.5 * shading_error(plain), (
+        shading_error(textured), shading_error(plain))
+    assert shading_error(textured) < 0.5 * shading_error(noisy)
+    # unmarked pixels are the plain denoising's, bit for bit
+    half = np.zeros(texture.shape, bool)
+    half[:, :20] = True
+    mixed = denoise_grid(noisy, albedo, normal, textured=half)
+    np.testing.assert_array_equal(mixed[:, 20:], plain[:, 20:])
+    np.testing.assert_array_equal(mixed[:, :20], textured[:, :20])
+
+
+def test_pixels_whose_samples_agreed_keep_their_values(oidn):
+    rng = np.random.default_rng(5)
+    clean = np.full((24, 24, 3), 0.4)
+    noisy = np.clip(clean + rng.normal(0, 0.1, clean.shape), 0, None)
+    noisy[:, :8] = 0.3  # a constant background: every sample gave 0.3
+    albedo, normal = _guides(clean.shape)
+    albedo[:, :8] = 0.0
+    exact = np.zeros(clean.shape[:2], bool)
+    exact[:, :8] = True
+    out = denoise_grid(noisy, albedo, normal, exact=exact)
+    np.testing.assert_array_equal(out[:, :8], noisy[:, :8])
+    np.testing.assert_array_equal(out[:, 8:], denoise_grid(noisy, albedo, normal)[:, 8:])

@@ -228,6 +228,21 @@ def test_dark_texture_squares_are_demodulated_like_bright_ones(variant):
     assert paper_error(idpass.image, converged) < 2.5 * paper_error(full, converged)
 
 
+def test_denoising_a_dark_texture_does_not_magnify_its_error(variant):
+    # the grid sees the checker as a pattern finer than OIDN keeps: the floor, a
+    # textured diffuse surface, is denoised as shading and multiplied back
+    pytest.importorskip("pyoidn")
+    from mitsuba_mrt.renderer.trace import diffuse_shapes
+
+    scene = mi.load_string(dark_checker_scene(spp=8))
+    assert diffuse_shapes(scene).tolist()[0] is False and diffuse_shapes(scene)[1:].all()
+    converged = np.mean([mitsuba_mrt.render_reference(scene, spp=256, seed=100 + k)[0]
+                         for k in range(2)], axis=0)
+    plain, denoised = (mitsuba_mrt.render(scene, mode="idpass", denoise=d)
+                       for d in ("none", "oidn"))
+    assert paper_error(denoised.image, converged) < paper_error(plain.image, converged)
+
+
 def test_one_sample_per_pixel_has_no_variance_and_no_smoothing(variant):
     # the float32 sums leave ~1e-7 of rounding in second moment - mean^2; a
     # single deterministic sample has no noise, so nothing is smoothed
