@@ -14,7 +14,7 @@ import warnings
 
 from ..errors import MRTError, MRTWarning, one_line
 from ..renderer.variants import VARIANT_CHOICES
-from ..types import DENOISERS
+from ..types import DENOISE_QUALITIES, DENOISERS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -61,6 +61,8 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--denoise", choices=DENOISERS, default=None,
                    help="denoise the traced grid before reconstructing it; oidn: Intel Open "
                         "Image Denoise (pip install mitsuba-mrt[denoise]) (none)")
+    g.add_argument("--denoise-quality", choices=DENOISE_QUALITIES, default=None,
+                   help="OIDN's quality preset with --denoise oidn (fast)")
 
 
 def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) -> None:
@@ -157,7 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _param_overrides(args) -> dict:
     """The MRT parameters given on the command line (None: not given)."""
-    names = [name for name, _, _ in _PARAM_OPTIONS] + ["id_rule", "rbf_degree", "denoise"]
+    names = [name for name, _, _ in _PARAM_OPTIONS] + ["id_rule", "rbf_degree", "denoise",
+                                                       "denoise_quality"]
     return {name: getattr(args, name) for name in names if getattr(args, name) is not None}
 
 

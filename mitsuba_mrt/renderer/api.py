@@ -164,7 +164,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     timings.trace = trace.seconds
     if params.denoise != "none":
         begin = time.perf_counter()
-        trace = _denoised(scene, pattern, trace, params.denoise)
+        trace = _denoised(scene, pattern, trace, params)
         timings.denoise = time.perf_counter() - begin
 
     recon = reconstruct(pattern, trace, params, used, tracer)
@@ -189,7 +189,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
 
 
 def _denoised(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
-              denoiser: str) -> SparseTrace:
+              params: MRTParams) -> SparseTrace:
     """``trace`` with its radiance denoised as the grid image it forms, the
     shading alone on textured diffuse surfaces, and the pixels whose samples
     all agreed kept: the background's, and a surface's if not black (all of
@@ -203,8 +203,8 @@ def _denoised(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
                  & ((trace.radiance > 0.0).any(axis=1) | (trace.shape_index == 0)))
         exact = exact.reshape(pattern.grid_shape)
     radiance = denoise_grid(trace.radiance.reshape(grid), trace.albedo.reshape(grid), normal,
-                            denoiser, textured=textured.reshape(pattern.grid_shape),
-                            exact=exact)
+                            params.denoise, params.denoise_quality,
+                            textured=textured.reshape(pattern.grid_shape), exact=exact)
     return replace(trace, radiance=np.asarray(radiance, dtype=np.float64).reshape(-1, 3))
 
 

@@ -127,6 +127,10 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - |string|
        - ``oidn``: denoise the traced grid with Intel Open Image Denoise before
          reconstructing it (needs ``pip install mitsuba-mrt[denoise]``) (Default: none).
+     * - denoise_quality
+       - |string|
+       - OIDN's quality with ``denoise`` ``oidn``: ``fast``, ``balanced`` (1.5-2x the
+         denoising time, a somewhat lower error on most scenes) or ``high`` (Default: fast).
      * - noise_smoothing
        - |float|
        - In ``fast``, ``refine`` and ``idpass``: average each traced grid value with

@@ -151,3 +151,24 @@ def test_pixels_whose_samples_agreed_keep_their_values(oidn):
     out = denoise_grid(noisy, albedo, normal, exact=exact)
     np.testing.assert_array_equal(out[:, :8], noisy[:, :8])
     np.testing.assert_array_equal(out[:, 8:], denoise_grid(noisy, albedo, normal)[:, 8:])
+
+
+def test_denoise_quality_is_a_parameter_of_python_and_xml(oidn, variant):
+    import mitsuba as mi
+    from conftest import small_scene_xml
+
+    import mitsuba_mrt
+    from mitsuba_mrt.types import MRTParams
+
+    scene = mi.load_string(small_scene_xml(32, '<integrator type="path"/>'))
+    fast, balanced = (mitsuba_mrt.render(scene, spp=4, mode="fast", denoise="oidn",
+                                         denoise_quality=q) for q in ("fast", "balanced"))
+    assert fast.params.denoise_quality == "fast" and balanced.params.denoise_quality == "balanced"
+    assert not np.array_equal(fast.trace.radiance, balanced.trace.radiance)
+    with pytest.raises(MRTError) as exc:
+        MRTParams(denoise_quality="best")
+    assert str(exc.value) == "denoise_quality must be one of fast, balanced, high, got 'best'"
+    xml = small_scene_xml(16, '<integrator type="mrt"><string name="denoise" value="oidn"/>'
+                              '<string name="denoise_quality" value="balanced"/>'
+                              '<integrator type="path"/></integrator>')
+    assert mi.load_string(xml).integrator().params.denoise_quality == "balanced"
