@@ -85,8 +85,26 @@ OIDN_QUALITIES = ("fast", "balanced")
 #: one, as the MRT's own ``denoise`` stage uses.
 OIDN_BASELINE_QUALITY = "fast"
 
-#: The MRT's method name with ``denoise="oidn"``: ``mrt-fast+oidn``.
+#: The MRT's method name with ``denoise="oidn"``: ``mrt-fast+oidn``, and with
+#: another ``denoise_quality`` than ``fast``: ``mrt-fast+oidn-balanced``.
 DENOISED_SUFFIX = "+oidn"
+#: The MRT methods the denoise experiment also runs with ``denoise_quality``
+#: ``balanced`` (the cheap one and the one of least error at high spp).
+DENOISE_BALANCED_METHODS = ("mrt-fast", "mrt-idpass")
+
+
+def denoised_name(method: str, params: dict) -> str:
+    """The row name of MRT ``method`` run with ``params`` (``denoise`` and its quality)."""
+    if params.get("denoise", "none") == "none":
+        return method
+    quality = params.get("denoise_quality", "fast")
+    return method + DENOISED_SUFFIX + ("" if quality == "fast" else f"-{quality}")
+
+
+def denoised_mode(name: str) -> tuple[str, str]:
+    """(the MRT method, the denoising suffix or "") of a row name: ``("mrt-fast", "+oidn")``."""
+    base, plus, rest = name.partition("+")
+    return base, plus + rest
 
 
 # --------------------------------------------------------------------------- methods
@@ -131,12 +149,23 @@ def resolve_methods(names=None) -> list[str]:
 
 @dataclass
 class Setting:
-    """One set of MRT parameters at a point: ``x`` is its swept value."""
+    """One set of MRT parameters at a point: ``x`` is its swept value; ``methods``
+    the methods it is measured with (empty: every one)."""
 
     params: dict
     x: float = math.nan
     label: str = ""
     group: str = ""
+    methods: tuple = ()
+
+    def applies_to(self, method: str) -> bool:
+        return not self.methods or method in self.methods
+
+
+def setting_pairs(point: "Point", methods) -> list:
+    """(setting index, method) of every method measured at every setting of ``point``."""
+    return [(s, m) for s, setting in enumerate(point.settings) for m in methods
+            if setting.applies_to(m)]
 
 
 @dataclass
@@ -304,6 +333,10 @@ def _denoise(quick: bool, res: int | None) -> Experiment:
     settings = [Setting({"sample_fraction": fraction, "denoise": d},
                         label=f"f={fraction:g}" + ("" if d == "none" else f", denoise={d}"))
                 for d in ("none", "oidn")]
+    settings.append(Setting({"sample_fraction": fraction, "denoise": "oidn",
+                             "denoise_quality": "balanced"},
+                            label=f"f={fraction:g}, denoise=oidn, quality=balanced",
+                            methods=DENOISE_BALANCED_METHODS))
     fig1 = Point("paper_fig1.xml", {"res": res or (32 if quick else 400), "integrator": "path",
                                     "spp": spp, "jitter": "true"}, spp, settings,
                  group="paper_fig1")

@@ -50,9 +50,10 @@ from pathlib import Path
 import numpy as np
 
 from ..app.imageio import atomic_path
-from .experiments import (DENOISED_SUFFIX, EQUAL_TIME, FULL, OIDN, OIDN_BASELINE_QUALITY,
+from .experiments import (EQUAL_TIME, FULL, OIDN, OIDN_BASELINE_QUALITY,
                           OIDN_EQUAL_TIME, OIDN_NOAUX, OIDN_NOAUX_EQUAL_TIME, OIDN_QUALITIES,
-                          Experiment, Point, Setting, available_methods)
+                          Experiment, Point, Setting, available_methods, denoised_name,
+                          setting_pairs)
 
 #: Timed seconds of the full render below which a point gets more rounds.
 MIN_TIMED_SECONDS = 1.0
@@ -362,7 +363,7 @@ class PointRunner:
         self.scene = load_scene(self.scenes_dir / point.scene, **point.defines)
         self.width, self.height = (int(v) for v in self.scene.sensors()[0].film().crop_size())
         self.full = Runs()
-        self.runs = {(s, m): Runs() for s in range(len(point.settings)) for m in self.mrt_methods}
+        self.runs = {pair: Runs() for pair in setting_pairs(point, self.mrt_methods)}
         self.failed = {}
         self.converged = None
 
@@ -600,7 +601,8 @@ class PointRunner:
     @staticmethod
     def ticks(experiment: Experiment, point: Point, methods: list, repeats: int) -> int:
         """Steps of :meth:`run` that tick the progress bar."""
-        return (1 + len(point.settings) * (len(methods) - 1)) * (repeats + 1) + 1
+        pairs = setting_pairs(point, [m for m in methods if m != FULL])
+        return (1 + len(pairs)) * (repeats + 1) + 1
 
 
 # --------------------------------------------------------------------------- denoise
@@ -684,7 +686,8 @@ class DenoiseRunner(PointRunner):
     @staticmethod
     def ticks(experiment: Experiment, point: Point, methods: list, repeats: int) -> int:
         ladder = len(experiment.ladder) or 1
-        per_round = ladder * (1 + len(point.settings) * (len(methods) - 1))
+        pairs = setting_pairs(point, [m for m in methods if m != FULL])
+        per_round = ladder * (1 + len(pairs))
         return per_round * (repeats + DENOISE_WARMUP_ROUNDS) + 1
 
     def run(self, keep_images_for: int | None = None) -> tuple[list, None]:
@@ -698,8 +701,9 @@ class DenoiseRunner(PointRunner):
         self.full_at = {spp: Runs(spp=spp) for spp in self.ladder}
         self.oidn = {(m, q, spp): Runs(spp=spp) for spp in self.ladder
                      for m in (OIDN, OIDN_NOAUX) for q in OIDN_QUALITIES}
-        self.mrt = {(s, m, spp): Runs(spp=spp) for s in range(len(self.point.settings))
-                    for m in self.mrt_methods for spp in self.ladder}
+        self.mrt = {(s, m, spp): Runs(spp=spp)
+                    for s, m in setting_pairs(self.point, self.mrt_methods)
+                    for spp in self.ladder}
         self.failed = {}
         for _ in range(DENOISE_WARMUP_ROUNDS):
             self._round(warm=True)
@@ -712,7 +716,7 @@ class DenoiseRunner(PointRunner):
             rounds += 1
         self.converged = self._converged_reference()
         self.tick()
-        per_round = 1 + len(self.point.settings) * len(self.mrt_methods)
+        per_round = 1 + len(setting_pairs(self.point, self.mrt_methods))
         for _ in range(self.skipped_ticks * per_round * (self.repeats + DENOISE_WARMUP_ROUNDS)):
             self.tick()  # the spp the sampler rounded onto another
         for key, status in self.failed.items():
@@ -827,7 +831,6 @@ class DenoiseRunner(PointRunner):
                                     self.failed.get(key)))
         for (s, m, spp), r in self.mrt.items():
             setting = point.settings[s]
-            name = m + (DENOISED_SUFFIX if setting.params.get("denoise", "none") != "none"
-                        else "")
-            rows.append(row(name, setting.label, r, r.spp, self.failed.get((s, m, spp))))
+            rows.append(row(denoised_name(m, setting.params), setting.label, r, r.spp,
+                            self.failed.get((s, m, spp))))
         return rows

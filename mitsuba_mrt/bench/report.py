@@ -30,8 +30,8 @@ from dataclasses import asdict, fields
 import numpy as np
 
 from ..app.imageio import atomic_path, srgb_encode
-from .experiments import (BASELINES, DENOISED_SUFFIX, EQUAL_TIME_BASELINES, FULL, OIDN,
-                          OIDN_NOAUX, Experiment)
+from .experiments import (BASELINES, EQUAL_TIME_BASELINES, FULL, OIDN, OIDN_NOAUX,
+                          Experiment, denoised_mode)
 from .measure import CONVERGED_FACTOR, NOISE_FREE, MethodRow
 
 #: Columns of every CSV, in order: the fields of :class:`MethodRow`.
@@ -569,7 +569,7 @@ def _denoise_stage(rows) -> dict:
     for group, curves in denoise_curves(rows).items():
         _, t64 = _reference_error(curves)
         stages = [_num(r.get("denoise_s")) / t64 for label, pts in curves.items()
-                  if label.endswith(DENOISED_SUFFIX) for _, _, r in pts]
+                  if _is_mrt(label) and denoised_mode(label)[1] for _, _, r in pts]
         stages = [s for s in stages if math.isfinite(s)]
         if stages:
             out[group] = (float(np.median(stages)), max(stages))
@@ -681,7 +681,7 @@ def plot_denoise(rows, path, experiment: Experiment) -> None:
     nrows = math.ceil(n / cols)
     fig = _figure(3.2 * cols + 1.8, 2.9 * nrows)
     axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
-    modes = list(dict.fromkeys(label.removesuffix(DENOISED_SUFFIX)
+    modes = list(dict.fromkeys(denoised_mode(label)[0]
                                for curves in scenes.values() for label in curves
                                if _is_mrt(label)))
     handles = {}
@@ -695,9 +695,10 @@ def plot_denoise(rows, path, experiment: Experiment) -> None:
                 style = dict(color="0.55", ls="--" if method == OIDN_NOAUX else "-",
                              marker="s", mfc="none" if quality == "balanced" else "0.55")
             else:
-                k = modes.index(label.removesuffix(DENOISED_SUFFIX))
+                mode, denoised = denoised_mode(label)
+                k = modes.index(mode)
                 style = dict(color=f"C{k % 10}", marker="^",
-                             ls="--" if label.endswith(DENOISED_SUFFIX) else "-")
+                             ls=":" if denoised.count("-") else "--" if denoised else "-")
             line, = ax.plot([p[0] for p in pts], [p[1] for p in pts], ms=3, lw=1.0, **style)
             handles.setdefault(label, line)
         if math.isfinite(e64):
