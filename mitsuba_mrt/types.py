@@ -15,6 +15,7 @@ from typing import Protocol
 import numpy as np
 
 from .errors import MRTError
+from .recon.denoise import QUALITIES
 from .recon.ids import ID_RULES, encode_ids
 from .recon.sampling import check_fraction
 
@@ -22,7 +23,7 @@ from .recon.sampling import check_fraction
 #: Denoisers the traced grid can go through before the reconstruction.
 DENOISERS = ("none", "oidn")
 #: OIDN's quality presets, fastest first.
-DENOISE_QUALITIES = ("fast", "balanced", "high")
+DENOISE_QUALITIES = QUALITIES
 
 
 @dataclass(frozen=True)

@@ -23,11 +23,10 @@ import threading
 import numpy as np
 
 from ..errors import MRTError
-from ..types import DENOISE_QUALITIES
 from .compose import safe_albedo
 
 #: OIDN's quality presets, fastest first.
-QUALITIES = DENOISE_QUALITIES
+QUALITIES = ("fast", "balanced", "high")
 
 #: The quality :func:`denoise_grid` uses: on a 2-core CPU ``fast`` takes 0.5 to
 #: 0.85 of ``balanced``'s time on the grid of a 400 x 400 image, for an MRT error
