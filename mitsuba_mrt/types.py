@@ -51,9 +51,9 @@ class MRTParams:
         Denoise the traced grid before reconstructing it (``oidn``: Intel
         Open Image Denoise, with the trace's albedo and normals).
     denoise_quality : {'fast', 'balanced', 'high'}
-        OIDN's quality preset for ``denoise="oidn"``: ``balanced`` takes
-        1.5-2x the denoising time of ``fast`` for a somewhat lower error on
-        most scenes (``high`` is ``balanced``'s network on a CPU).
+        OIDN's quality preset for ``denoise="oidn"``: ``balanced`` and
+        ``high`` run a larger network than ``fast``, slower and usually more
+        accurate (docs/BENCHMARKS.md, Denoising).
     noise_smoothing : float
         In ``fast``, ``refine`` and ``idpass``, average each traced grid
         value with the neighbours of its id that agree with it within this

@@ -34,8 +34,8 @@ QUALITIES = ("fast", "balanced", "high")
 GRID_QUALITY = "fast"
 
 #: A diffuse surface is textured where its grid pixels' albedo (mean over
-#: RGB) spans more than this ratio, 95th over 5th percentile: a single
-#: colour's pixels span at most ~1.2 (those that straddle another shape).
+#: RGB) spans more than this ratio, 95th over 5th percentile: the pixels of a
+#: single colour differ only where they straddle another shape.
 TEXTURE_CONTRAST = 1.5
 #: Fewest grid pixels of a surface for its albedo's spread to say anything.
 TEXTURE_MIN_PIXELS = 8

@@ -129,8 +129,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
          reconstructing it (needs ``pip install mitsuba-mrt[denoise]``) (Default: none).
      * - denoise_quality
        - |string|
-       - OIDN's quality with ``denoise`` ``oidn``: ``fast``, ``balanced`` (1.5-2x the
-         denoising time, a somewhat lower error on most scenes) or ``high`` (Default: fast).
+       - OIDN's quality with ``denoise`` ``oidn``: ``fast``, or ``balanced`` and ``high``,
+         a larger network, slower and usually more accurate (Default: fast).
      * - noise_smoothing
        - |float|
        - In ``fast``, ``refine`` and ``idpass``: average each traced grid value with
