@@ -91,6 +91,10 @@ DENOISED_SUFFIX = "+oidn"
 #: The MRT methods the denoise experiment also runs with ``denoise_quality``
 #: ``balanced`` (the cheap one and the one of least error at high spp).
 DENOISE_BALANCED_METHODS = ("mrt-fast", "mrt-idpass")
+#: The other sample fractions the denoise experiment runs (those of the
+#: tradeoff experiment), with and without ``denoise``, with these methods.
+DENOISE_OTHER_FRACTIONS = (0.05, 0.2)
+DENOISE_FRACTION_METHODS = ("mrt-fast",)
 
 
 def denoised_name(method: str, params: dict) -> str:
@@ -321,9 +325,11 @@ def _gallery(quick: bool, res: int | None) -> Experiment:
 def _denoise(quick: bool, res: int | None) -> Experiment:
     """The Fig. 1 scene (``path``, jittered) and every gallery scene, over a ladder of spp.
 
-    Each point has two settings, the MRT's defaults without and with
-    ``denoise="oidn"``; the runner (:class:`.measure.DenoiseRunner`) runs
-    every mode at both, the full render and ``oidn`` at every spp of the ladder.
+    Each point has the MRT's defaults without and with ``denoise="oidn"``,
+    measured with every mode, and for some modes ``denoise_quality``
+    ``balanced`` and the other fractions of :data:`DENOISE_OTHER_FRACTIONS`;
+    the runner (:class:`.measure.DenoiseRunner`) runs them, the full render
+    and ``oidn`` at every spp of the ladder.
     """
     from ..types import MRTParams
 
@@ -337,6 +343,10 @@ def _denoise(quick: bool, res: int | None) -> Experiment:
                              "denoise_quality": "balanced"},
                             label=f"f={fraction:g}, denoise=oidn, quality=balanced",
                             methods=DENOISE_BALANCED_METHODS))
+    settings += [Setting({"sample_fraction": f, "denoise": d},
+                         label=f"f={f:g}" + ("" if d == "none" else f", denoise={d}"),
+                         methods=DENOISE_FRACTION_METHODS)
+                 for f in DENOISE_OTHER_FRACTIONS for d in ("none", "oidn")]
     fig1 = Point("paper_fig1.xml", {"res": res or (32 if quick else 400), "integrator": "path",
                                     "spp": spp, "jitter": "true"}, spp, settings,
                  group="paper_fig1")

@@ -30,6 +30,7 @@ from dataclasses import asdict, fields
 import numpy as np
 
 from ..app.imageio import atomic_path, srgb_encode
+from ..types import MRTParams
 from .experiments import (BASELINES, EQUAL_TIME_BASELINES, FULL, OIDN, OIDN_NOAUX,
                           Experiment, denoised_mode)
 from .measure import CONVERGED_FACTOR, NOISE_FREE, MethodRow
@@ -417,6 +418,10 @@ EQUAL_ERROR_TARGETS = {"paper_fig1": 0.05, "gallery": 0.10}
 DENOISE_STAGE_TARGET = 0.05
 
 
+#: The label of the default sample fraction in the denoise experiment's settings.
+_DEFAULT_FRACTION = f"f={MRTParams().sample_fraction:g}"
+
+
 def _is_oidn(method: str) -> bool:
     return method in (OIDN, OIDN_NOAUX)
 
@@ -426,9 +431,13 @@ def _is_mrt(method: str) -> bool:
 
 
 def _curve_label(method: str, setting: str) -> str:
-    """A curve's name: the method, with OIDN's quality (``oidn fast``)."""
+    """A curve's name: the method, with OIDN's quality (``oidn fast``) or the MRT's
+    sample fraction where it is not the default (``mrt-fast f=0.05``)."""
     if _is_oidn(method):
         return f"{method} {setting.split('=', 1)[-1]}"
+    fraction = setting.split(",", 1)[0]
+    if _is_mrt(method) and fraction.startswith("f=") and fraction != _DEFAULT_FRACTION:
+        return f"{method} {fraction}"
     return method
 
 
@@ -681,7 +690,7 @@ def plot_denoise(rows, path, experiment: Experiment) -> None:
     nrows = math.ceil(n / cols)
     fig = _figure(3.2 * cols + 1.8, 2.9 * nrows)
     axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
-    modes = list(dict.fromkeys(denoised_mode(label)[0]
+    modes = list(dict.fromkeys(denoised_mode(label.split()[0])[0]
                                for curves in scenes.values() for label in curves
                                if _is_mrt(label)))
     handles = {}
@@ -695,9 +704,11 @@ def plot_denoise(rows, path, experiment: Experiment) -> None:
                 style = dict(color="0.55", ls="--" if method == OIDN_NOAUX else "-",
                              marker="s", mfc="none" if quality == "balanced" else "0.55")
             else:
-                mode, denoised = denoised_mode(label)
+                mode, denoised = denoised_mode(label.split()[0])
                 k = modes.index(mode)
-                style = dict(color=f"C{k % 10}", marker="^",
+                fraction = (label.split() + [""])[1]
+                style = dict(color=f"C{k % 10}",
+                             marker={"": "^", "f=0.05": "v", "f=0.2": "D"}.get(fraction, "x"),
                              ls=":" if denoised.count("-") else "--" if denoised else "-")
             line, = ax.plot([p[0] for p in pts], [p[1] for p in pts], ms=3, lw=1.0, **style)
             handles.setdefault(label, line)

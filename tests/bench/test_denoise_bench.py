@@ -17,11 +17,15 @@ def test_the_experiment_covers_fig1_and_the_gallery():
     assert fig1.defines == {"res": 400, "integrator": "path", "spp": 64, "jitter": "true"}
     assert [p.group for p in gallery] == list(experiments.GALLERY_SCENES)
     assert all(p.defines == {"res": 128, "spp": 64} for p in gallery)
-    assert [s.params["denoise"] for s in fig1.settings] == ["none", "oidn", "oidn"]
+    assert [s.params["denoise"] for s in fig1.settings] == ["none", "oidn", "oidn"] + [
+        "none", "oidn"] * 2
     assert fig1.settings[2].params["denoise_quality"] == "balanced"
-    # the balanced setting is measured with fast and idpass only
+    assert [s.params["sample_fraction"] for s in fig1.settings] == [0.1] * 3 + [0.05] * 2 + [
+        0.2] * 2
+    # the balanced setting is measured with fast and idpass, the other fractions with fast
     pairs = experiments.setting_pairs(fig1, list(experiments.DENOISE_METHODS))
     assert [(s, m) for s, m in pairs if s == 2] == [(2, "mrt-fast"), (2, "mrt-idpass")]
+    assert [(s, m) for s, m in pairs if s > 2] == [(s, "mrt-fast") for s in range(3, 7)]
     assert experiments.denoised_name("mrt-fast", fig1.settings[2].params) == (
         "mrt-fast+oidn-balanced")
     assert experiments.denoised_mode("mrt-fast+oidn-balanced") == ("mrt-fast", "+oidn-balanced")
@@ -46,6 +50,12 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
     balanced = [r for r in fig1 if r["method"] == "mrt-fast+oidn-balanced"]
     assert {r["setting"] for r in balanced} == {"f=0.1, denoise=oidn, quality=balanced"}
     assert sorted(int(r["spp"]) for r in balanced) == [1, 4]
+    assert {r["setting"] for r in fig1 if r["method"] == "mrt-fast+oidn"} == {
+        "f=0.1, denoise=oidn", "f=0.05, denoise=oidn", "f=0.2, denoise=oidn"}
+    curves = report.denoise_curves(rows)["paper_fig1"]
+    assert {"mrt-fast", "mrt-fast f=0.05", "mrt-fast+oidn f=0.2",
+            "mrt-fast+oidn-balanced"} <= set(curves)
+    assert all(len(curves[label]) == 2 for label in curves if label.startswith("mrt-"))
     assert [(r["method"], r["spp"]) for r in noise_free] == [("mrt-fast", "4")]
     assert math.isnan(float(noise_free[0]["total_s"]))
     assert 0 < float(noise_free[0]["error_converged"]) < float(
