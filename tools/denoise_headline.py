@@ -21,7 +21,7 @@ def main():
     args = parser.parse_args()
     with open(args.csv, newline="") as f:
         rows = list(csv.DictReader(f))
-    print(f"{'scene':24s} {'full error':>10s}  {'cheapest MRT (time, method, spp)':44s} "
+    print(f"{'scene':24s} {'full error':>10s}  {'cheapest MRT (time, method, spp, f)':44s} "
           f"cheapest OIDN (time, method, spp)")
     for scene in dict.fromkeys(r["scene"] for r in rows):
         mine = [r for r in rows if r["scene"] == scene
@@ -31,7 +31,9 @@ def main():
         def cheapest(which):
             runs = [r for r in mine if which(r["method"])]
             best = min(runs, key=lambda r: float(r["relative_time"]))
-            return f"{float(best['relative_time']):.3f} {best['method']} {best['spp']} spp"
+            fraction = best["setting"].split(",")[0]  # f=0.05, or quality= for OIDN
+            return (f"{float(best['relative_time']):.3f} {best['method']} {best['spp']} spp"
+                    + (f" {fraction}" if fraction.startswith("f=") else ""))
 
         print(f"{scene.removesuffix('.xml'):24s} {float(full['error_converged']):10.4f}  "
               f"{cheapest(lambda m: m.startswith('mrt-')):44s} "

@@ -336,16 +336,17 @@ def _denoise(quick: bool, res: int | None) -> Experiment:
     ladder = DENOISE_LADDER_QUICK if quick else DENOISE_LADDER
     spp = max(ladder)
     fraction = MRTParams().sample_fraction
-    settings = [Setting({"sample_fraction": fraction, "denoise": d},
-                        label=f"f={fraction:g}" + ("" if d == "none" else f", denoise={d}"))
-                for d in ("none", "oidn")]
-    settings.append(Setting({"sample_fraction": fraction, "denoise": "oidn",
-                             "denoise_quality": "balanced"},
-                            label=f"f={fraction:g}, denoise=oidn, quality=balanced",
-                            methods=DENOISE_BALANCED_METHODS))
-    settings += [Setting({"sample_fraction": f, "denoise": d},
-                         label=f"f={f:g}" + ("" if d == "none" else f", denoise={d}"),
-                         methods=DENOISE_FRACTION_METHODS)
+
+    def setting(f, denoise, quality=None, methods=()):
+        params = {"sample_fraction": f, "denoise": denoise}
+        label = f"f={f:g}" + ("" if denoise == "none" else f", denoise={denoise}")
+        if quality is not None:
+            params["denoise_quality"], label = quality, label + f", quality={quality}"
+        return Setting(params, label=label, methods=methods)
+
+    settings = [setting(fraction, "none"), setting(fraction, "oidn"),
+                setting(fraction, "oidn", "balanced", DENOISE_BALANCED_METHODS)]
+    settings += [setting(f, d, methods=DENOISE_FRACTION_METHODS)
                  for f in DENOISE_OTHER_FRACTIONS for d in ("none", "oidn")]
     fig1 = Point("paper_fig1.xml", {"res": res or (32 if quick else 400), "integrator": "path",
                                     "spp": spp, "jitter": "true"}, spp, settings,
