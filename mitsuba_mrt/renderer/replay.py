@@ -35,8 +35,12 @@ from typing import Callable
 
 import drjit as dr
 
-#: Recordings kept per kernel function (least recently used dropped first).
-RECORDINGS = 8
+#: Recordings kept per kernel function (least recently used dropped first):
+#: one per layout, and a sweep cycles through many (``bench denoise``: 3
+#: fractions x 7 spp for the grid, 5 albedo sample counts for the id pass);
+#: a recording holds kernels, not images (32 of them: resident memory within
+#: 10 MB of 8's, docs/BENCHMARKS.md, Replayed traces).
+RECORDINGS = 32
 #: Traced object sets ((scene, sensor, integrator), (scene, sensor)) that keep
 #: their token: their objects are held, so that no other object can take over
 #: an identity (a freed object's ``id``) and be given their recordings; a set

@@ -444,6 +444,28 @@ def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
     return bool((np.bincount(y * width + x, minlength=count) == 1).all())
 
 
+#: Bytes to which the arrays given to a recorded trace are aligned (a cache line,
+#: and the widest SIMD register).
+ALIGNMENT = 64
+
+
+def _aligned_float(values: np.ndarray):
+    """``values`` as a Dr.Jit ``Float`` over a float32 copy aligned to :data:`ALIGNMENT`.
+
+    Dr.Jit maps a NumPy array's memory instead of copying it, and a frozen
+    call (:mod:`.replay`) is recorded anew whenever an input's memory turns
+    from aligned to unaligned or back: NumPy's buffers are aligned or not by
+    chance, so the same trace was recorded again on some renders.
+    """
+    values = np.asarray(values, dtype=np.float32).ravel()
+    slack = ALIGNMENT // values.itemsize
+    buffer = np.empty(len(values) + slack, dtype=np.float32)
+    start = (-buffer.ctypes.data % ALIGNMENT) // values.itemsize
+    out = buffer[start:start + len(values)]
+    out[...] = values
+    return mi.Float(out)
+
+
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
@@ -461,8 +483,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf))
-    sums = _DEVELOP(scene, sensor, integrator, mi.Float(pixel_xy[:, 0]),
-                    mi.Float(pixel_xy[:, 1]), mi.Float(table.cdf.astype(np.float32)),
+    sums = _DEVELOP(scene, sensor, integrator, _aligned_float(pixel_xy[:, 0]),
+                    _aligned_float(pixel_xy[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if every:
@@ -597,9 +619,9 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     """Shape, visible lights and mirror chain of every pixel's centre ray."""
     n = len(pixel_xy)
     layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
-    mask, pointers, chain, normal = _IDS(scene, sensor, lights,
-                                         mi.Float(pixel_xy[:, 0]), mi.Float(pixel_xy[:, 1]),
-                                         layout, objects=(scene, sensor), record=replay)
+    mask, pointers, chain, normal = _IDS(scene, sensor, lights, _aligned_float(pixel_xy[:, 0]),
+                                         _aligned_float(pixel_xy[:, 1]), layout,
+                                         objects=(scene, sensor), record=replay)
     keys, indices = lookup
 
     def to_index(ptr):

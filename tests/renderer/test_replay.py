@@ -90,6 +90,24 @@ def test_replaying_false_traces_anew():
     assert trace._DEVELOP.frozen.n_recordings == before + 1
 
 
+def test_each_layout_is_recorded_once():
+    # NumPy's buffers are 64-byte aligned or not by chance, and Dr.Jit records a
+    # frozen call anew when an input's alignment changes: some renders were
+    # recorded again; and the recordings of more layouts than a sweep cycles
+    # through (fractions x spp x modes) must all be kept
+    from mitsuba_mrt.renderer import trace
+
+    scene = mi.load_string(PATH_SCENE)
+    layouts = [(f, spp, mode) for f in (0.1, 0.2, 0.3) for spp in (1, 4, 9)
+               for mode in ("fast", "idpass")]
+    counts = []
+    for _ in range(4):
+        for f, spp, mode in layouts:
+            mitsuba_mrt.render(scene, spp=spp, mode=mode, sample_fraction=f)
+        counts.append((trace._DEVELOP.frozen.n_recordings, trace._IDS.frozen.n_recordings))
+    assert counts[1:] == counts[:1] * 3
+
+
 def test_a_dropped_scene_is_let_go_and_a_held_one_kept():
     # a live scene's objects are Dr.Jit instances every later trace goes through
     import gc
