@@ -9,7 +9,7 @@ from __future__ import annotations
 import enum
 import math
 from collections import Counter
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Protocol
 
 import numpy as np
@@ -177,6 +177,14 @@ class SparseTrace:
         shapes = self.shape_index if rule == "paper" or self.path_id is None else self.path_id
         return encode_ids(shapes, self.visible_lights, self.num_lights, rule)
 
+    def take(self, index) -> "SparseTrace":
+        """The trace of the pixels at ``index`` (an index array or a slice),
+        with the same ``seconds``."""
+        n = len(self.radiance)
+        return replace(self, **{f.name: value[index] for f in fields(self)
+                                if isinstance(value := getattr(self, f.name), np.ndarray)
+                                and len(value) == n})
+
 
 @dataclass
 class Timings:
@@ -311,12 +319,15 @@ class Tracer(Protocol):
     integrator runs, with ``aovs`` the id AOVs (albedo, shape, lights) are
     traced; what is not traced is zero.  ``replay`` says the same number of
     pixels is traced again on the next render of the image (the grid, the id
-    pass): its kernels are recorded once and replayed after.
+    pass): its kernels are recorded once and replayed after.  ``pad`` says
+    a set of pixels like it, of another size, is (``refine``'s edges, thin
+    regions): the set is padded to one of a few sizes, whose kernels are
+    recorded once and replayed after.
     """
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True,
-                 replay: bool = False) -> "SparseTrace": ...
+                 replay: bool = False, pad: bool = False) -> "SparseTrace": ...
 
 
 def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:

@@ -63,7 +63,8 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     missing = unsupported_pixels(pattern, grid_ids, id_map)
     missing[np.ix_(pattern.rows, pattern.cols)] = False
     extra_xy = np.argwhere(missing)[:, ::-1]
-    extra = tracer(extra_xy, stream=SeedStream.SLIVERS, aovs=False) if len(extra_xy) else None
+    extra = (tracer(extra_xy, stream=SeedStream.SLIVERS, aovs=False, pad=True)
+             if len(extra_xy) else None)
     id_pass_s = aov.seconds
     edges_s = time.perf_counter() - start - id_pass_s - (extra.seconds if extra else 0.0)
 

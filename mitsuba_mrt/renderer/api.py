@@ -97,10 +97,10 @@ class GridTracer:
     seed: int
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
-                 aovs: bool = True, radiance: bool = True,
-                 replay: bool = False) -> SparseTrace:
+                 aovs: bool = True, radiance: bool = True, replay: bool = False,
+                 pad: bool = False) -> SparseTrace:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
-                            self.seed + int(stream), aovs, radiance, replay)
+                            self.seed + int(stream), aovs, radiance, replay, pad)
 
 
 def _check_spp(spp: int | None) -> int | None:

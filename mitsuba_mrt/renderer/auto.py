@@ -176,19 +176,12 @@ def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: 
     band = pilot.band
     image = band.radiance.reshape(band_height, width, 3)
 
-    def band_tracer(pixel_xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True):
+    def band_tracer(pixel_xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True,
+                    replay=False, pad=False):
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
-        n = len(index)
-        return replace(ids, radiance=band.radiance[index], albedo=ids.albedo[index],
-                       shape_index=ids.shape_index[index],
-                       visible_lights=ids.visible_lights[index],
-                       path_id=None if ids.path_id is None else ids.path_id[index],
-                       curved_mirror=None if ids.curved_mirror is None
-                       else ids.curved_mirror[index],
-                       normal=None if ids.normal is None else ids.normal[index],
-                       alpha=None if band.alpha is None else band.alpha[index],
-                       variance=None if band.variance is None else band.variance[index],
-                       seconds=0.0) if n else replace(ids, seconds=0.0)
+        pixels = band.take(index)
+        return replace(ids.take(index), radiance=pixels.radiance, alpha=pixels.alpha,
+                       variance=pixels.variance, seconds=0.0)
 
     sub = SamplePattern(width, band_height, pattern.rows[pilot.rows], pattern.cols)
     recon = reconstruct(sub, pilot.grid, params, mode, band_tracer)

@@ -21,14 +21,16 @@ Where Dr.Jit cannot record a trace (it raises), the trace runs plainly, and
 is not tried again for those objects and layout.
 
 Only traces whose size repeats from render to render are recorded (the
-grid, the id pass): a one-off set of pixels, like ``refine``'s edge pixels,
-would be recorded for nothing.
+grid, the id pass), and sets whose size changes (``refine``'s edge pixels,
+``idpass``'s thin regions) once padded to one of a few sizes
+(:func:`padded_size`); a recording per size of those would be made for nothing.
 """
 
 from __future__ import annotations
 
 import contextlib
 import itertools
+import math
 import sys
 from collections import OrderedDict
 from typing import Callable
@@ -37,10 +39,11 @@ import drjit as dr
 
 #: Recordings kept per kernel function (least recently used dropped first):
 #: one per layout, and a sweep cycles through many (``bench denoise``: 3
-#: fractions x 7 spp for the grid, 5 albedo sample counts for the id pass);
-#: a recording holds kernels, not images (32 of them: resident memory within
-#: 10 MB of 8's, docs/BENCHMARKS.md, Replayed traces).
-RECORDINGS = 32
+#: fractions x 7 spp for the grid, 5 albedo sample counts for the id pass, a
+#: few padded sizes of ``refine``'s edges per spp); a recording holds kernels,
+#: not images (128 of them: resident memory within 10 MB of 32's,
+#: docs/BENCHMARKS.md, Replayed traces).
+RECORDINGS = 128
 #: Traced object sets ((scene, sensor, integrator), (scene, sensor)) that keep
 #: their token: their objects are held, so that no other object can take over
 #: an identity (a freed object's ``id``) and be given their recordings; a set
@@ -71,6 +74,30 @@ def replaying(enabled: bool):
         yield
     finally:
         _replaying.pop()
+
+
+def active() -> bool:
+    """Whether traces asked to replay may (see :func:`replaying`)."""
+    return _replaying[-1]
+
+
+#: Sizes a padded pixel set is rounded up to: a geometric series of this
+#: ratio (at most 19 % of the traced pixels are padding).
+PAD_RATIO = 2.0 ** 0.25
+
+
+def padded_size(count: int) -> int:
+    """The size of the series :data:`PAD_RATIO` at or above ``count``.
+
+    Examples
+    --------
+    >>> [padded_size(n) for n in (1, 2, 3, 100, 101, 1000)]
+    [1, 2, 4, 108, 108, 1024]
+    """
+    if count <= 1:
+        return max(count, 0)
+    k = math.ceil(math.log(count, PAD_RATIO) - 1e-9)
+    return max(count, math.ceil(PAD_RATIO ** k - 1e-6))
 
 
 class Replay:

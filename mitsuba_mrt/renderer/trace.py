@@ -28,7 +28,8 @@ from ..errors import MRTError
 from ..types import SparseTrace
 from ..runtime.jit import jit_workers
 from .pixel_filter import filter_table
-from .replay import Replay
+from .replay import Replay, padded_size
+from .replay import active as replay_active
 
 #: At most this many lights are tracked in the ``visible_lights`` bit mask.
 MAX_TRACKED_LIGHTS = 32
@@ -344,7 +345,8 @@ class _Developed:
 
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
-                 radiance: bool = True, replay: bool = False) -> SparseTrace:
+                 radiance: bool = True, replay: bool = False,
+                 pad: bool = False) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -371,11 +373,22 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         and samples, instead of tracing the integrator anew: for the pixel
         sets every render of an image traces (the grid, the id pass), not
         for one-off sets, which would only be recorded (:mod:`.replay`).
+    pad : bool
+        For sets whose size changes from render to render (``refine``'s
+        edges): trace the set padded with copies of its first pixel to the
+        next size of :func:`.replay.padded_size`'s few, recorded once and
+        replayed after.  The pixels' values are those of the set traced
+        unpadded: Mitsuba's samplers seed each sample by its index.
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
     pixel_xy = np.asarray(pixel_xy, dtype=np.int64)
     n = len(pixel_xy)
+    if pad and n and is_jit() and replay_active() and replayable(scene):
+        size = padded_size(n)
+        padded = np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], size - n, axis=0)])
+        return trace_pixels(scene, sensor, integrator, padded, spp, seed, aovs, radiance,
+                            replay=True).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)

@@ -88,7 +88,8 @@ def test_refine_traces_cells_whose_shading_the_grid_cannot_follow():
         return SparseTrace(truth[xy[:, 1], xy[:, 0]], np.ones((n, 3)), np.ones(n, np.int64),
                            np.zeros(n, np.uint32), 0, 1, 0.0, variance=np.zeros((n, 3)))
 
-    def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True, replay=False):
+    def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True, replay=False,
+               pad=False):
         return trace_at(xy)
 
     out = reconstruct(pattern, trace_at(pattern.pixel_xy), MRTParams(), "refine", tracer)
@@ -113,7 +114,8 @@ def test_refine_finds_edges_along_a_single_grid_row():
                            shapes[xy[:, 0]].astype(np.int64), np.zeros(n, np.uint32), 0, 1,
                            0.0)
 
-    def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True, replay=False):
+    def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True, replay=False,
+               pad=False):
         return trace_at(xy)
 
     out = reconstruct(pattern, trace_at(pattern.pixel_xy), MRTParams(), "refine", tracer)

@@ -108,6 +108,29 @@ def test_each_layout_is_recorded_once():
     assert counts[1:] == counts[:1] * 3
 
 
+def test_a_padded_trace_equals_the_unpadded_one():
+    # refine's edge sets change size each render: padded to a few sizes, they
+    # replay one recording; the independent sampler seeds each sample by its
+    # index, so the pixels' values are those traced without padding
+    from mitsuba_mrt.renderer import trace
+    from mitsuba_mrt.renderer.replay import padded_size
+
+    scene = mi.load_string(PATH_SCENE)
+    integrator = scene.integrator()
+    xy = grid_pattern(24, 24, 0.3).pixel_xy
+    sizes = [n for n in range(20, len(xy)) if padded_size(n) == padded_size(len(xy) - 3)]
+    assert len(sizes) >= 2 and padded_size(sizes[0]) > sizes[0]
+    for n in sizes[:2]:
+        padded = _trace(scene, integrator, xy[:n], True, pad=True)
+        plain = _trace(scene, integrator, xy[:n], False)
+        assert len(padded.radiance) == n
+        for a, b in zip(_fields(padded), _fields(plain)):
+            np.testing.assert_array_equal(a, b)
+    before = trace._DEVELOP.frozen.n_recordings
+    _trace(scene, integrator, xy[:sizes[-1]], True, pad=True)  # another size, same bucket
+    assert trace._DEVELOP.frozen.n_recordings == before
+
+
 def test_a_dropped_scene_is_let_go_and_a_held_one_kept():
     # a live scene's objects are Dr.Jit instances every later trace goes through
     import gc
