@@ -372,7 +372,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         scene, sensor and integrator are traced again with as many pixels
         and samples, instead of tracing the integrator anew: for the pixel
         sets every render of an image traces (the grid, the id pass), not
-        for one-off sets, which would only be recorded (:mod:`.replay`).
+        for one-off sets, which would only be recorded (:mod:`.replay`; sets
+        of a size that varies: ``pad``).
     pad : bool
         For sets whose size changes from render to render (``refine``'s
         edges): trace the set padded with copies of its first pixel to the
