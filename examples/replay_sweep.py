@@ -13,7 +13,7 @@ import argparse
 import time
 
 import mitsuba_mrt
-from mitsuba_mrt.renderer import trace
+from mitsuba_mrt.renderer.replay import recordings
 
 
 def resident_mb() -> int:
@@ -22,10 +22,6 @@ def resident_mb() -> int:
             if line.startswith("VmRSS"):
                 return int(line.split()[1]) // 1024
     return -1
-
-
-def recordings() -> int:
-    return trace._DEVELOP.frozen.n_recordings + trace._IDS.frozen.n_recordings
 
 
 def main():

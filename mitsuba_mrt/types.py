@@ -320,9 +320,9 @@ class Tracer(Protocol):
     traced; what is not traced is zero.  ``replay`` says the same number of
     pixels is traced again on the next render of the image (the grid, the id
     pass): its kernels are recorded once and replayed after.  ``pad`` says
-    a set of pixels like it, of another size, is (``refine``'s edges, thin
-    regions): the set is padded to one of a few sizes, whose kernels are
-    recorded once and replayed after.
+    a set like it but of another size is traced on the next render
+    (``refine``'s edges, thin regions): the set is padded to one of a few
+    sizes, whose kernels are recorded once and replayed after.
     """
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,

@@ -55,6 +55,8 @@ _tokens = itertools.count(1)
 _held: OrderedDict = OrderedDict()
 #: Whether traces asked to may replay: the innermost :func:`replaying` block's.
 _replaying = [True]
+#: Every :class:`Replay` made (one per kernel function).
+_instances: list = []
 
 
 @contextlib.contextmanager
@@ -74,6 +76,11 @@ def replaying(enabled: bool):
         yield
     finally:
         _replaying.pop()
+
+
+def recordings() -> int:
+    """How many recordings every :class:`Replay` has made so far (kept or dropped)."""
+    return sum(replay.frozen.n_recordings for replay in _instances)
 
 
 def active() -> bool:
@@ -118,6 +125,7 @@ class Replay:
         self.plain = kernel  # traced on each call
         self.frozen = dr.freeze(recorded, limit=RECORDINGS, warn_after=1 << 30)
         self._failed: set = set()  # (token, layout) that Dr.Jit could not record
+        _instances.append(self)
 
     def __call__(self, *args, objects: tuple, record: bool):
         """``kernel(*args)``; with ``record``, from the recording for these

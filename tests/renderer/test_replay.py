@@ -6,6 +6,7 @@ import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
+from mitsuba_mrt.renderer.replay import padded_size, recordings
 from mitsuba_mrt.renderer.trace import is_jit, trace_pixels
 from conftest import small_scene_xml
 
@@ -95,8 +96,6 @@ def test_each_layout_is_recorded_once():
     # frozen call anew when an input's alignment changes: some renders were
     # recorded again; and the recordings of more layouts than a sweep cycles
     # through (fractions x spp x modes) must all be kept
-    from mitsuba_mrt.renderer import trace
-
     scene = mi.load_string(PATH_SCENE)
     layouts = [(f, spp, mode) for f in (0.1, 0.2, 0.3) for spp in (1, 4, 9)
                for mode in ("fast", "idpass")]
@@ -104,16 +103,14 @@ def test_each_layout_is_recorded_once():
     for _ in range(4):
         for f, spp, mode in layouts:
             mitsuba_mrt.render(scene, spp=spp, mode=mode, sample_fraction=f)
-        counts.append((trace._DEVELOP.frozen.n_recordings, trace._IDS.frozen.n_recordings))
+        counts.append(recordings())
     assert counts[1:] == counts[:1] * 3
 
 
 def test_a_padded_trace_equals_the_unpadded_one():
     # refine's edge sets change size each render: padded to a few sizes, they
-    # replay one recording; the independent sampler seeds each sample by its
-    # index, so the pixels' values are those traced without padding
-    from mitsuba_mrt.renderer import trace
-    from mitsuba_mrt.renderer.replay import padded_size
+    # replay one recording; Mitsuba's samplers seed each sample by its index,
+    # so the pixels' values are those traced without padding
 
     scene = mi.load_string(PATH_SCENE)
     integrator = scene.integrator()
@@ -126,9 +123,9 @@ def test_a_padded_trace_equals_the_unpadded_one():
         assert len(padded.radiance) == n
         for a, b in zip(_fields(padded), _fields(plain)):
             np.testing.assert_array_equal(a, b)
-    before = trace._DEVELOP.frozen.n_recordings
+    before = recordings()
     _trace(scene, integrator, xy[:sizes[-1]], True, pad=True)  # another size, same bucket
-    assert trace._DEVELOP.frozen.n_recordings == before
+    assert recordings() == before
 
 
 def test_a_dropped_scene_is_let_go_and_a_held_one_kept():
