@@ -73,6 +73,17 @@ def _is_mirror(bsdf, valid):
     return bool(valid and delta and not smooth)
 
 
+def _hit_shape(si):
+    """The shape ``si`` hit as the scene lists it: for a hit on an instance
+    of a shape group, the instance (the shape inside the group is shared by
+    all instances, and the scene does not list it); a Dr.Jit pointer (as
+    ``UInt32``) in JIT variants, the object in scalar ones."""
+    if is_jit():
+        instance = dr.reinterpret_array(mi.UInt32, si.instance)
+        return dr.select(instance != 0, instance, dr.reinterpret_array(mi.UInt32, si.shape))
+    return si.instance if si.instance is not None else si.shape
+
+
 def _follow_mirrors(scene, ray, si, valid):
     """Follow specular bounces from the first hit.
 
@@ -95,14 +106,13 @@ def _follow_mirrors(scene, ray, si, valid):
         new_si = scene.ray_intersect(new_ray, mirror)
         if is_jit():
             throughput = dr.select(mirror, throughput * weight, throughput)
-            chain.append((mirror, dr.select(mirror, dr.reinterpret_array(mi.UInt32, new_si.shape),
-                                            mi.UInt32(0))))
+            chain.append((mirror, dr.select(mirror, _hit_shape(new_si), mi.UInt32(0))))
             ray = dr.select(mirror, new_ray, ray)
             si = dr.select(mirror, new_si, si)
             valid = dr.select(mirror, new_si.is_valid(), valid)
         else:
             throughput = throughput * weight
-            chain.append((True, new_si.shape if new_si.is_valid() else None))
+            chain.append((True, _hit_shape(new_si) if new_si.is_valid() else None))
             ray, si, valid = new_ray, new_si, bool(new_si.is_valid())
     return ray, si, valid, throughput, chain
 
@@ -661,7 +671,7 @@ def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
     position = mi.Point2f(pixel_x + 0.5, pixel_y + 0.5)
     ray, _ = _camera_ray(sensor, None, position, 1, centre=True)  # no random numbers
     si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
-    pointers = dr.reinterpret_array(mi.UInt32, si.shape)
+    pointers = _hit_shape(si)
     normal = dr.select(valid, si.sh_frame.n, 0.0)
     dr.eval(mask, pointers, chain, normal)
     return mask, pointers, chain, normal
@@ -679,7 +689,7 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
         ray, _ = _camera_ray(sensor, sampler, mi.Point2f(x + 0.5, y + 0.5), 1, centre=True)
         si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
         if valid:
-            shape_index[k] = lookup.get(id(si.shape), 0)
+            shape_index[k] = lookup.get(id(_hit_shape(si)), 0)
             visible[k] = int(mask)
             normal[k] = np.asarray(si.sh_frame.n, dtype=np.float64)
             for b, (_, shape) in enumerate(chain):
