@@ -11,7 +11,6 @@ with the share of pixels each mode traced.
 
 import argparse
 
-
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import edge_mask, error_map
 from mitsuba_mrt.renderer.trace import ordered_shapes
