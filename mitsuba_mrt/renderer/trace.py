@@ -280,6 +280,31 @@ def _path_ids(shape_index: np.ndarray, steps: list, num_shapes: int) -> np.ndarr
     return path
 
 
+#: Shapes inside shape groups, by address: a number each, given on first
+#: sight (the scene does not list them, so they have no index of their own).
+_inner_shapes: dict = {}
+
+
+def _with_inner_shapes(path: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """``path`` ids told apart by the shape inside an instance's group.
+
+    An instance is one listed shape, but its group may hold several (a cup
+    and the ball in it): where ``inner`` (the address of the shape hit inside
+    the group, 0 elsewhere) is set, its number is folded into the path id,
+    in 31 bits by a hash as :func:`_path_ids` folds long chains.  Numbers
+    stay fixed for the process, so ids agree between the traces of a render.
+    """
+    hit = inner != 0
+    if not hit.any():
+        return path
+    numbers = np.array([_inner_shapes.setdefault(int(a), len(_inner_shapes) + 1)
+                        for a in np.unique(inner[hit])], dtype=np.int64)
+    slot = numbers[np.searchsorted(np.unique(inner[hit]), inner[hit])]
+    out = path.copy()
+    out[hit] = (path[hit] * 1000003 + slot) % ((1 << 31) - 1)
+    return out
+
+
 def _natural_key(text: str):
     return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", text)]
 
@@ -643,9 +668,9 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     """Shape, visible lights and mirror chain of every pixel's centre ray."""
     n = len(pixel_xy)
     layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
-    mask, pointers, chain, normal = _IDS(scene, sensor, lights, _aligned_float(pixel_xy[:, 0]),
-                                         _aligned_float(pixel_xy[:, 1]), layout,
-                                         objects=(scene, sensor), record=replay)
+    mask, pointers, inner, chain, normal = _IDS(
+        scene, sensor, lights, _aligned_float(pixel_xy[:, 0]), _aligned_float(pixel_xy[:, 1]),
+        layout, objects=(scene, sensor), record=replay)
     keys, indices = lookup
 
     def to_index(ptr):
@@ -659,22 +684,26 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     steps = [np.where(_to_numpy(bounced, n).astype(bool),
                       np.where(to_index(ptr) > 0, to_index(ptr), len(keys) + 1), 0)
              for bounced, ptr in chain]
-    return (shape_index, _to_numpy(mask, n).astype(np.uint32),
-            _path_ids(shape_index, steps, len(keys)), _to_numpy(normal, n))
+    path = _with_inner_shapes(_path_ids(shape_index, steps, len(keys)),
+                              _to_numpy(inner, n).astype(np.int64))
+    return shape_index, _to_numpy(mask, n).astype(np.uint32), path, _to_numpy(normal, n)
 
 
 def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
     """The kernel of :func:`_ids_jit`: (visible-light mask, shape pointers,
-    mirror chain, shading normal) of each pixel's centre ray, every input an
+    the pointer of the shape inside an instance's group (0 elsewhere), mirror
+    chain, shading normal) of each pixel's centre ray, every input an
     argument as :func:`_develop_kernel`'s."""
     _, rule, mirrors, _ = layout
     position = mi.Point2f(pixel_x + 0.5, pixel_y + 0.5)
     ray, _ = _camera_ray(sensor, None, position, 1, centre=True)  # no random numbers
     si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
     pointers = _hit_shape(si)
+    instance = dr.reinterpret_array(mi.UInt32, si.instance)
+    inner = dr.select(instance != 0, dr.reinterpret_array(mi.UInt32, si.shape), 0)
     normal = dr.select(valid, si.sh_frame.n, 0.0)
-    dr.eval(mask, pointers, chain, normal)
-    return mask, pointers, chain, normal
+    dr.eval(mask, pointers, inner, chain, normal)
+    return mask, pointers, inner, chain, normal
 
 
 def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=False):
@@ -685,16 +714,19 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
     normal = np.zeros((n, 3))
     mirrors = has_mirrors(scene)
     steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
+    inner = np.zeros(n, dtype=np.int64)
     for k, (x, y) in enumerate(pixel_xy.tolist()):
         ray, _ = _camera_ray(sensor, sampler, mi.Point2f(x + 0.5, y + 0.5), 1, centre=True)
         si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
         if valid:
             shape_index[k] = lookup.get(id(_hit_shape(si)), 0)
+            inner[k] = si.shape.ptr if si.instance is not None else 0
             visible[k] = int(mask)
             normal[k] = np.asarray(si.sh_frame.n, dtype=np.float64)
             for b, (_, shape) in enumerate(chain):
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
-    return shape_index, visible, _path_ids(shape_index, steps, len(lookup)), normal
+    path = _with_inner_shapes(_path_ids(shape_index, steps, len(lookup)), inner)
+    return shape_index, visible, path, normal
 
 
 #: The trace kernels, replayed from a recording when the same trace repeats.

@@ -83,3 +83,6 @@ def test_instances_are_regions_of_their_own():
     on_instances = np.isin(trace.shape_index, list(instances))
     # demodulated: a pixel's one sample may miss the cup its centre sees
     assert (trace.albedo[on_instances] > 0).any(axis=1).mean() > 0.8
+    # and a cup and the ball in it are two regions, though one instance
+    exact = trace.ids("exact")[on_instances]
+    assert len(np.unique(exact)) > len(np.unique(trace.shape_index[on_instances]))
