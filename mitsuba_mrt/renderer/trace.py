@@ -297,11 +297,11 @@ def _with_inner_shapes(path: np.ndarray, inner: np.ndarray) -> np.ndarray:
     hit = inner != 0
     if not hit.any():
         return path
+    addresses, which = np.unique(inner[hit], return_inverse=True)
     numbers = np.array([_inner_shapes.setdefault(int(a), len(_inner_shapes) + 1)
-                        for a in np.unique(inner[hit])], dtype=np.int64)
-    slot = numbers[np.searchsorted(np.unique(inner[hit]), inner[hit])]
+                        for a in addresses], dtype=np.int64)
     out = path.copy()
-    out[hit] = (path[hit] * 1000003 + slot) % ((1 << 31) - 1)
+    out[hit] = (path[hit] * 1000003 + numbers[which]) % ((1 << 31) - 1)
     return out
 
 
