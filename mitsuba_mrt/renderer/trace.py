@@ -682,7 +682,7 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
 
     shape_index = to_index(pointers)
     steps = [np.where(_to_numpy(bounced, n).astype(bool),
-                      np.where(to_index(ptr) > 0, to_index(ptr), len(keys) + 1), 0)
+                      np.where((index := to_index(ptr)) > 0, index, len(keys) + 1), 0)
              for bounced, ptr in chain]
     path = _with_inner_shapes(_path_ids(shape_index, steps, len(keys)),
                               _to_numpy(inner, n).astype(np.int64))
