@@ -19,6 +19,7 @@ from __future__ import annotations
 import re
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 import drjit as dr
 import mitsuba as mi
@@ -38,8 +39,79 @@ MIRROR_DEPTH = 4
 
 
 def has_mirrors(scene: mi.Scene) -> bool:
-    """True if a shape of ``scene`` has a purely specular (delta) BSDF."""
-    return any(_is_mirror_bsdf(shape.bsdf()) for shape in scene.shapes())
+    """True if a shape of ``scene`` (one inside a shape group included) has a
+    purely specular (delta) BSDF."""
+    return any(shows(scene, lambda shape: _is_mirror_bsdf(shape.bsdf()), any))
+
+
+def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:
+    """Per shape in :func:`ordered_shapes` order, ``combine`` (``any`` or
+    ``all``) of ``test`` over the shapes whose BSDFs it shows.
+
+    A shape shows its own; an ``instance`` shows the shapes of its
+    ``shapegroup`` (its own BSDF is a default diffuse that no ray meets).
+    Mitsuba does not say which group an instance refers to: where the groups
+    differ in ``test``, it is found by bounding box (the group's box carried
+    by the instance's transform is the instance's box), and where that
+    leaves several groups (or none), the instance shows the shapes of all
+    candidates (or of every group).
+    """
+    shapes = ordered_shapes(scene)
+    instance = [shape.class_name() == "Instance" for shape in shapes]
+    groups = _shape_groups(scene) if any(instance) else []
+    verdicts = {combine(test(inner) for inner in members) for _, members in groups}
+
+    def verdict(shape, inst: bool) -> bool:
+        if not inst or not groups:
+            return bool(test(shape))
+        if len(verdicts) == 1:
+            return next(iter(verdicts))
+        return combine(test(inner) for inner in _instance_surfaces(shape, groups))
+
+    return [verdict(shape, inst) for shape, inst in zip(shapes, instance)]
+
+
+def _shape_groups(scene: mi.Scene) -> list[tuple]:
+    """The scene's shape groups as (bounding box corners (8, 3), inner shapes)."""
+    def shapes_below(node) -> list:
+        found = []
+
+        class Collect(mi.TraversalCallback):
+            def put(self, name, value, *flags):
+                if isinstance(value, mi.Shape):
+                    found.append(value)
+
+        node.traverse(Collect())
+        return found
+
+    listed = {id(shape) for shape in scene.shapes()}
+    groups = []
+    for node in shapes_below(scene):
+        if id(node) not in listed and node.class_name() != "Instance":
+            groups.append((_box_corners(node.bbox()), shapes_below(node)))
+    return groups
+
+
+def _box_corners(box) -> np.ndarray:
+    low, high = np.ravel(box.min).astype(np.float64), np.ravel(box.max).astype(np.float64)
+    pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=bool)
+    return np.where(pick, high, low)
+
+
+def _instance_surfaces(instance, groups: list[tuple]) -> list:
+    """The shapes of the groups whose box, moved by ``instance``'s transform, is its box."""
+    to_world = np.asarray(mi.traverse(instance)["to_world"].matrix,
+                          dtype=np.float64).reshape(4, 4)
+    box = _box_corners(instance.bbox())
+    low, high = box.min(axis=0), box.max(axis=0)
+    tolerance = 1e-4 * max(1.0, float(np.abs(box).max()))
+    matches = []
+    for corners, inner in groups:
+        moved = corners @ to_world[:3, :3].T + to_world[:3, 3]
+        if (np.abs(moved.min(axis=0) - low).max() <= tolerance
+                and np.abs(moved.max(axis=0) - high).max() <= tolerance):
+            matches.append(inner)
+    return [shape for inner in (matches or [inner for _, inner in groups]) for shape in inner]
 
 
 #: Shape types whose mirror reflections keep their size (planar mirrors).
@@ -54,9 +126,9 @@ def curved_mirror_indices(scene: mi.Scene) -> np.ndarray:
     Meshes count as curved (their facets may point anywhere).
     """
     planar = {getattr(mi.ShapeType, name) for name in PLANAR_TYPES}
-    return np.array([k + 1 for k, shape in enumerate(ordered_shapes(scene))
-                     if _is_mirror_bsdf(shape.bsdf()) and shape.shape_type() not in planar],
-                    dtype=np.int64)
+    curved = shows(scene, lambda shape: (_is_mirror_bsdf(shape.bsdf())
+                                         and shape.shape_type() not in planar))
+    return np.flatnonzero(curved).astype(np.int64) + 1
 
 
 def _is_mirror_bsdf(bsdf) -> bool:
@@ -311,16 +383,17 @@ def _natural_key(text: str):
 
 def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     """Per shape index (1-based, as in :func:`ordered_shapes`; entry 0 for no
-    shape), whether the shape's BSDF is purely diffuse: its albedo is then
-    its reflectance at the hit, exact for every sample."""
+    shape), whether the shape's BSDF is purely diffuse (an instance's: all
+    those of its group's shapes): its albedo is then its reflectance at the
+    hit, exact for every sample."""
     other = (mi.BSDFFlags.Glossy, mi.BSDFFlags.Delta, mi.BSDFFlags.Transmission)
-    out = [False]
-    for shape in ordered_shapes(scene):
-        bsdf = shape.bsdf()
+
+    def diffuse(bsdf) -> bool:
         flags = int(bsdf.flags()) if bsdf is not None else 0
-        out.append(mi.has_flag(flags, mi.BSDFFlags.DiffuseReflection)
-                   and not any(mi.has_flag(flags, f) for f in other))
-    return np.array(out, dtype=bool)
+        return (mi.has_flag(flags, mi.BSDFFlags.DiffuseReflection)
+                and not any(mi.has_flag(flags, f) for f in other))
+
+    return np.array([False] + shows(scene, lambda shape: diffuse(shape.bsdf()), all), dtype=bool)
 
 
 def ordered_shapes(scene: mi.Scene) -> list:

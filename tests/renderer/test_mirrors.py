@@ -59,3 +59,49 @@ def test_refinement_resolves_reflected_edges(variant):
     assert refined.traced_mask[in_mirror].all()
     assert refine[edge & in_mirror].mean() <= refine[edge & ~in_mirror].mean()
     assert refine[edge & in_mirror].mean() < 0.1 * fast[edge & in_mirror].mean()
+
+
+def _in_a_group(shape_xml: str, group: str, instances: list[str]) -> str:
+    """``shape_xml`` inside a shape group, and instances of it (each a transform's XML)."""
+    return (f'<shape type="shapegroup" id="{group}">{shape_xml}</shape>'
+            + "".join(f'<shape type="instance" id="{group}_{k}"><ref id="{group}"/>'
+                      f'<transform name="to_world">{t}</transform></shape>'
+                      for k, t in enumerate(instances)))
+
+
+def test_a_mirror_inside_a_shape_group_is_followed(variant):
+    from mitsuba_mrt.renderer.trace import ordered_shapes
+
+    # an instance's own BSDF is a default diffuse: the mirror in its group
+    # was not seen, the id pass did not follow it, and both reflections
+    # were one region
+    mirror = MIRROR_SCENE.split("</shape>")[0] + "</shape>"
+    spheres = MIRROR_SCENE[len(mirror):]
+    extra = _in_a_group(mirror, "mirror_group", ['<translate x="0"/>']) + spheres
+    scene = mi.load_string(small_scene_xml(64, extra=extra, shapes=False, lights=False))
+    result = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0)
+    trace = result.trace
+    mirror_index = 1 + [s.id() for s in ordered_shapes(scene)].index("mirror_group_0")
+    lit = (trace.shape_index == mirror_index) & (trace.radiance.sum(axis=1) > 0)
+    assert lit.sum() > 50
+    assert len(set(trace.path_id[lit].tolist())) == 2
+    assert len(set(trace.ids("exact")[lit].tolist())) == 2
+
+
+def test_instances_show_their_own_groups_bsdfs(variant):
+    from mitsuba_mrt.renderer.trace import (curved_mirror_indices, diffuse_shapes, has_mirrors,
+                                            ordered_shapes)
+
+    matte = ('<shape type="sphere" id="m"><float name="radius" value="0.5"/>'
+             '<bsdf type="diffuse"/></shape>')
+    chrome = ('<shape type="cube" id="c"><transform name="to_world"><scale value="0.3"/>'
+              '</transform><bsdf type="conductor"/></shape>')
+    extra = (_in_a_group(matte, "a_matte", ['<translate x="-2"/>', '<translate x="-1" y="2"/>'])
+             + _in_a_group(chrome, "b_chrome", ['<scale value="2"/><translate x="2"/>',
+                                                '<rotate y="1" angle="30"/><translate y="-2"/>']))
+    scene = mi.load_string(small_scene_xml(16, extra=extra, shapes=False))
+    names = [shape.id() for shape in ordered_shapes(scene)]
+    assert has_mirrors(scene)
+    assert diffuse_shapes(scene)[1:].tolist() == [n.startswith("a_") for n in names]
+    assert curved_mirror_indices(scene).tolist() == [k + 1 for k, n in enumerate(names)
+                                                     if n.startswith("b_")]
