@@ -283,6 +283,10 @@ class Reconstruction:
     stats : Counter
         Counts: ``regions``, and per mode ``rbf``, ``no_samples``,
         ``edge_pixels``, ``refined_pixels``, ``sliver_pixels``, ...
+    mixed : ndarray of bool, shape (height, width), or None
+        Pixels whose value mixes their region's light with a neighbouring
+        region's (``idpass``'s edge pixels that show two surfaces,
+        :mod:`mitsuba_mrt.recon.mixed`); None for modes that do not mix.
     """
 
     image: np.ndarray
@@ -291,6 +295,7 @@ class Reconstruction:
     timings: Timings = field(default_factory=Timings)
     skips: Skips = field(default_factory=Skips)
     stats: Counter = field(default_factory=Counter)
+    mixed: np.ndarray | None = None
 
 
 class SeedStream(enum.IntEnum):

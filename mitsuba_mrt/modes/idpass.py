@@ -7,7 +7,9 @@ The expensive integrator then runs only at the grid pixels, and at the
 pixels whose id no grid sample nearby carries (thin slivers).  Irradiance
 (radiance / albedo) is interpolated within ids and multiplied by the
 full-resolution albedo, so textures stay as sharp as in a full render, as
-the report's Section 4 proposes.
+the report's Section 4 proposes.  An edge pixel whose albedo is a mix of
+its region's colour and a neighbour's shows both surfaces: it is given
+both regions' light in that mix (:mod:`mitsuba_mrt.recon.mixed`).
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ from collections import Counter
 
 import numpy as np
 
-from ..recon.compose import demodulate, safe_albedo
+from ..recon.compose import demodulate
+from ..recon.mixed import unmix_edges
 from ..recon.sampling import SamplePattern, cell_coordinates
 from ..recon.within_region import GridValues, black_background, interpolate_within_ids
 from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
@@ -58,7 +61,7 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     every = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False, replay=True)
     id_map = aov.ids(rule).reshape(height, width)
-    albedo = safe_albedo(aov.albedo).reshape(height, width, 3)
+    albedo = np.asarray(aov.albedo, dtype=np.float64).reshape(height, width, 3)
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     missing = unsupported_pixels(pattern, grid_ids, id_map)
     missing[np.ix_(pattern.rows, pattern.cols)] = False
@@ -74,18 +77,20 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     constant = black_background(grid_ids.ravel(), trace.radiance, stats)
     skips = Skips(background=stats.pop("background", 0))
     interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values, id_map, constant)
-    image = grid.unscaled(interp) * albedo  # float64: traced pixels go in exactly
     traced_mask = pattern.mask.copy()
+    traced_mask[extra_xy[:, 1], extra_xy[:, 0]] = True
+    # float64: traced pixels go in exactly
+    image, unmixed = unmix_edges(grid.unscaled(interp), albedo, id_map, traced_mask)
     if extra is not None:
         check_radiance(extra.radiance, "pixels traced for thin regions")
         image[extra_xy[:, 1], extra_xy[:, 0]] = extra.radiance
-        traced_mask[extra_xy[:, 1], extra_xy[:, 0]] = True
     image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(pattern.grid_shape + (3,))
     stats["regions"] = int(len(np.unique(id_map)))
     stats["edge_pixels"] = int(edge_pixels)
     stats["sliver_pixels"] = int(len(extra_xy))
+    stats["unmixed_pixels"] = int(unmixed.sum())
     stats["fireflies"] = grid.fireflies
     timings = Timings(trace_more=id_pass_s + (extra.seconds if extra else 0.0), edges=edges_s,
                       interpolate=time.perf_counter() - start)
-    return Reconstruction(image, id_map, traced_mask, timings, skips, stats)
+    return Reconstruction(image, id_map, traced_mask, timings, skips, stats, unmixed)
 

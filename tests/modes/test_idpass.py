@@ -45,3 +45,31 @@ def test_refine_demodulates_a_texture_like_fast(variant):
     fast = mitsuba_mrt.render(scene, mode="fast")
     assert "skipped_albedo_division" not in refine.stats  # albedo varies within the plane
     assert paper_error(refine.image, reference) <= paper_error(fast.image, reference) + 1e-6
+
+
+def test_silhouette_pixels_are_unmixed_by_the_id_pass_albedo(variant, monkeypatch):
+    # a pixel on the sphere's outline shows the sphere and the plane; from its
+    # own region's light alone it was off by the other's share
+    from mitsuba_mrt.modes import idpass
+    from mitsuba_mrt.recon.compose import safe_albedo
+
+    scene = mi.load_string(small_scene_xml(64, lights=False, extra=(
+        '<emitter type="point"><point name="position" x="2" y="2" z="5"/>'
+        '<rgb name="intensity" value="60"/></emitter>')))
+    reference, _ = mitsuba_mrt.render_reference(scene, spp=64)
+    unmixed = {}
+
+    def recording(irradiance, albedo, ids, keep):
+        image, unmixed["mask"] = unmix_edges(irradiance, albedo, ids, keep)
+        return image, unmixed["mask"]
+
+    unmix_edges = idpass.unmix_edges
+    monkeypatch.setattr(idpass, "unmix_edges", recording)
+    result = mitsuba_mrt.render(scene, mode="idpass", spp=16)  # 16 albedo samples a pixel
+    monkeypatch.setattr(idpass, "unmix_edges", lambda irradiance, albedo, ids, keep: (
+        irradiance * safe_albedo(albedo), np.zeros(ids.shape, bool)))
+    plain = mitsuba_mrt.render(scene, mode="idpass", spp=16)
+    mask = unmixed["mask"]
+    assert mask.sum() == result.stats["unmixed_pixels"] > 20
+    error = np.abs(result.image - reference)[mask].mean()
+    assert error < 0.85 * np.abs(plain.image - reference)[mask].mean()
