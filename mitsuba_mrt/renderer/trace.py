@@ -84,10 +84,11 @@ def _shape_groups(scene: mi.Scene) -> list[tuple]:
         node.traverse(Collect())
         return found
 
-    listed = {id(shape) for shape in scene.shapes()}
+    listed = scene.shapes()  # held, so that the traversal meets these very objects
+    known = {id(shape) for shape in listed}
     groups = []
     for node in shapes_below(scene):
-        if id(node) not in listed and node.class_name() != "Instance":
+        if id(node) not in known and node.class_name() != "Instance":
             groups.append((_box_corners(node.bbox()), shapes_below(node)))
     return groups
 

@@ -89,8 +89,8 @@ def test_a_mirror_inside_a_shape_group_is_followed(variant):
 
 
 def test_instances_show_their_own_groups_bsdfs(variant):
-    from mitsuba_mrt.renderer.trace import (curved_mirror_indices, diffuse_shapes, has_mirrors,
-                                            ordered_shapes)
+    from mitsuba_mrt.renderer.trace import (_shape_groups, curved_mirror_indices, diffuse_shapes,
+                                            has_mirrors, ordered_shapes)
 
     matte = ('<shape type="sphere" id="m"><float name="radius" value="0.5"/>'
              '<bsdf type="diffuse"/></shape>')
@@ -101,6 +101,7 @@ def test_instances_show_their_own_groups_bsdfs(variant):
                                                 '<rotate y="1" angle="30"/><translate y="-2"/>']))
     scene = mi.load_string(small_scene_xml(16, extra=extra, shapes=False))
     names = [shape.id() for shape in ordered_shapes(scene)]
+    assert sorted(s.id() for _, inner in _shape_groups(scene) for s in inner) == ["c", "m"]
     assert has_mirrors(scene)
     assert diffuse_shapes(scene)[1:].tolist() == [n.startswith("a_") for n in names]
     assert curved_mirror_indices(scene).tolist() == [k + 1 for k, n in enumerate(names)
