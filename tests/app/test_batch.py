@@ -263,7 +263,7 @@ def test_scheduler_option_and_animation(remote_cluster, tmp_path):
 def test_killed_worker_loses_no_frame(remote_cluster, tmp_path):
     address, client = remote_cluster
     out = tmp_path / "out"
-    count = 8
+    count = 16  # enough frames that the kill lands before the last one is written
     killed = {}
 
     def kill_a_busy_worker():
