@@ -80,6 +80,7 @@ class Pilot:
     band_height: int
     rows: np.ndarray       # indices of the grid rows inside the band
     grid: SparseTrace      # those grid rows' samples, with the id AOVs
+    ids: SparseTrace       # the band's id pass: every pixel's ids and albedo, no radiance
 
 
 def decide_without_pilot(width: int, height: int, spp: int, jit: bool) -> AutoDecision | None:
@@ -104,11 +105,12 @@ def decide(pattern: SamplePattern, tracer: Tracer,
     The pilot traces the top ``1 / AUTO_BAND`` of the image: every pixel with
     the nested integrator alone (what a full render pays; kept as part of the
     image whatever wins) and the grid rows in it with the id AOVs (what the
-    MRT pays per traced pixel; the difference is the id AOVs' cost).  Kernel
+    MRT pays per traced pixel; the difference is the id AOVs' cost), and the
+    band's id pass (what ``idpass`` pays for every pixel).  Kernel
     compilation (a one-time cost) is left out.  Scaled to the whole image,
     with the reconstruction's cost per pixel calibrated once per process:
     ``refine`` adds ``AUTO_REFINE_SHARE`` of the pixels traced in full,
-    ``idpass`` the id AOVs of every pixel.  The cheaper runs only if it is
+    ``idpass`` the id pass.  The cheaper runs only if it is
     predicted below ``AUTO_MARGIN`` of the full render and if, on the band
     reconstructed from its grid rows, it is as accurate as a full render and
     more accurate than bicubic (:func:`band_accuracy`).
@@ -124,8 +126,11 @@ def decide(pattern: SamplePattern, tracer: Tracer,
         band = tracer(band_xy, stream=SeedStream.BAND, aovs=False, replay=True)
     with compile_seconds() as grid_compile:
         grid = tracer(xy[rows].reshape(-1, 2), stream=SeedStream.PILOT, replay=True)
+    with compile_seconds() as ids_compile:
+        ids = tracer(band_xy, stream=SeedStream.ID_PASS, radiance=False, replay=True)
     band_s = max(band.seconds - band_compile[0], 0.1 * band.seconds)
     grid_s = max(grid.seconds - grid_compile[0], 0.1 * grid.seconds)
+    ids_s = max(ids.seconds - ids_compile[0], 0.1 * ids.seconds)
     scale = height / band_height
     predicted_full = band_s * scale
     radiance_per_pixel = band_s / len(band_xy)
@@ -135,7 +140,7 @@ def decide(pattern: SamplePattern, tracer: Tracer,
                                + reconstruction_seconds_per_pixel() * pixels)
     predicted = {"refine": grid_and_reconstruction
                  + AUTO_REFINE_SHARE * pixels * (radiance_per_pixel + aov_per_pixel),
-                 "idpass": grid_and_reconstruction + pixels * aov_per_pixel}
+                 "idpass": grid_and_reconstruction + ids_s * scale}
     best = min(predicted, key=predicted.get)
     wins = predicted[best] < AUTO_MARGIN * predicted_full
     decision = AutoDecision(best if wins else "full", "pilot",
@@ -144,24 +149,24 @@ def decide(pattern: SamplePattern, tracer: Tracer,
                             predicted_refine_s=predicted["refine"],
                             predicted_idpass_s=predicted["idpass"],
                             predicted_mrt_s=predicted[best],
-                            compile_s=band_compile[0] + grid_compile[0])
-    pilot = Pilot(band, band_height, rows, grid)
+                            compile_s=band_compile[0] + grid_compile[0] + ids_compile[0])
+    pilot = Pilot(band, band_height, rows, grid, ids)
     if wins and len(rows) >= 2:
         begin = time.perf_counter()
-        accurate = band_accuracy(pattern, pilot, tracer, params, best, decision)
+        accurate = band_accuracy(pattern, pilot, params, best, decision)
         decision.check_s = time.perf_counter() - begin
         if not accurate:
             decision.mode_used, decision.reason = "full", "inaccurate"
     return decision, pilot
 
 
-def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: MRTParams,
-                  mode: str, decision: AutoDecision) -> bool:
+def band_accuracy(pattern: SamplePattern, pilot: Pilot, params: MRTParams, mode: str,
+                  decision: AutoDecision) -> bool:
     """Whether ``mode`` reconstructs the pilot's band as well as it must.
 
     The band's grid rows (traced with their own seed) are reconstructed
     with ``mode`` and with ``bicubic``; pixels that ``mode`` traces come from
-    the band's render, and its ids from an id pass over the band.  At the
+    the band's render, and its ids from the pilot's id pass over the band.  At the
     pixels neither traced, the mean squared difference to the band's render
     is the reconstruction's error plus the band's own noise ``s2``; the MRT's
     image is as accurate as a full render where that difference is at most
@@ -170,10 +175,7 @@ def band_accuracy(pattern: SamplePattern, pilot: Pilot, tracer: Tracer, params: 
     ``decision``.
     """
     width, band_height = pattern.width, pilot.band_height
-    ids = tracer(np.stack(np.meshgrid(np.arange(width), np.arange(band_height)),
-                          -1).reshape(-1, 2), stream=SeedStream.ID_PASS, radiance=False,
-                 replay=True)
-    band = pilot.band
+    ids, band = pilot.ids, pilot.band
     image = band.radiance.reshape(band_height, width, 3)
 
     def band_tracer(pixel_xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True,

@@ -251,6 +251,36 @@ def test_auto_pilot_decides_and_both_outcomes_are_complete(variant, monkeypatch,
         assert np.allclose(result.image[:32], reference[:32], atol=1e-6)
 
 
+def test_the_idpass_prediction_is_the_bands_id_pass_scaled(variant, monkeypatch):
+    # idpass's cost was predicted from the grid pixels' id AOVs (3-7x what an
+    # id pass costs on Fig. 1, so auto never chose it); the pilot now times
+    # the band's id pass, and the accuracy check reuses that pass
+    from dataclasses import replace
+
+    from mitsuba_mrt.renderer import auto
+    from mitsuba_mrt.types import SeedStream
+
+    monkeypatch.setattr(auto, "AUTO_MARGIN", 1e9)  # past the prediction, to the check
+    streams = []
+    decide = auto.decide
+
+    def slow_id_pass(pattern, tracer, params):
+        def traced(xy, **kwargs):
+            streams.append(kwargs.get("stream"))
+            out = tracer(xy, **kwargs)
+            if kwargs.get("stream") == SeedStream.ID_PASS:
+                out = replace(out, seconds=out.seconds + 100.0)
+            return out
+        return decide(pattern, traced, params)
+
+    monkeypatch.setattr(auto, "decide", slow_id_pass)
+    result = mitsuba_mrt.render(mi.load_string(small_scene_xml(512)), spp=8)
+    decision = result.auto
+    assert decision.check_s > 0 and streams.count(SeedStream.ID_PASS) == 1
+    assert decision.predicted_idpass_s >= 16 * 90  # the band is 1/16 of the image
+    assert decision.predicted_refine_s < 90 and decision.mode_used != "idpass"
+
+
 def test_auto_checks_accuracy_on_the_pilot_band(variant, monkeypatch):
     from mitsuba_mrt.renderer import auto
 
