@@ -95,6 +95,13 @@ DENOISE_BALANCED_METHODS = ("mrt-fast", "mrt-idpass")
 #: tradeoff experiment), with and without ``denoise``, with these methods.
 DENOISE_OTHER_FRACTIONS = (0.05, 0.2)
 DENOISE_FRACTION_METHODS = ("mrt-fast",)
+#: Beyond the ladder's top, on the gallery: the spp at which the MRT
+#: configurations of :data:`DENOISE_BEYOND_CONFIGS` (sample fraction, methods;
+#: with ``denoise``) are measured too, those closest to the full render's error
+#: at 64 spp, so the equal-error table says at what time they reach it.
+DENOISE_BEYOND = (128, 256)
+DENOISE_BEYOND_QUICK = (8,)
+DENOISE_BEYOND_CONFIGS = ((0.1, ("mrt-refine", "mrt-idpass")), (0.2, ("mrt-fast",)))
 
 
 def denoised_name(method: str, params: dict) -> str:
@@ -154,13 +161,15 @@ def resolve_methods(names=None) -> list[str]:
 @dataclass
 class Setting:
     """One set of MRT parameters at a point: ``x`` is its swept value; ``methods``
-    the methods it is measured with (empty: every one)."""
+    the methods it is measured with (empty: every one); ``ladder`` the spp it is
+    measured at in a ladder experiment (empty: the experiment's ladder)."""
 
     params: dict
     x: float = math.nan
     label: str = ""
     group: str = ""
     methods: tuple = ()
+    ladder: tuple = ()
 
     def applies_to(self, method: str) -> bool:
         return not self.methods or method in self.methods
@@ -329,7 +338,9 @@ def _denoise(quick: bool, res: int | None) -> Experiment:
     measured with every mode, and for some modes ``denoise_quality``
     ``balanced`` and the other fractions of :data:`DENOISE_OTHER_FRACTIONS`;
     the runner (:class:`.measure.DenoiseRunner`) runs them, the full render
-    and ``oidn`` at every spp of the ladder.
+    and ``oidn`` at every spp of the ladder. The gallery's points also have
+    :data:`DENOISE_BEYOND_CONFIGS` at the spp of :data:`DENOISE_BEYOND`
+    (settings of the same labels, so their rows extend the same curves).
     """
     from ..types import MRTParams
 
@@ -337,12 +348,12 @@ def _denoise(quick: bool, res: int | None) -> Experiment:
     spp = max(ladder)
     fraction = MRTParams().sample_fraction
 
-    def setting(f, denoise, quality=None, methods=()):
+    def setting(f, denoise, quality=None, methods=(), beyond=()):
         params = {"sample_fraction": f, "denoise": denoise}
         label = f"f={f:g}" + ("" if denoise == "none" else f", denoise={denoise}")
         if quality is not None:
             params["denoise_quality"], label = quality, label + f", quality={quality}"
-        return Setting(params, label=label, methods=methods)
+        return Setting(params, label=label, methods=methods, ladder=beyond)
 
     settings = [setting(fraction, "none"), setting(fraction, "oidn"),
                 setting(fraction, "oidn", "balanced", DENOISE_BALANCED_METHODS)]
@@ -351,9 +362,12 @@ def _denoise(quick: bool, res: int | None) -> Experiment:
     fig1 = Point("paper_fig1.xml", {"res": res or (32 if quick else 400), "integrator": "path",
                                     "spp": spp, "jitter": "true"}, spp, settings,
                  group="paper_fig1")
+    beyond = DENOISE_BEYOND_QUICK if quick else DENOISE_BEYOND
+    beyond = [setting(f, "oidn", methods=methods, beyond=beyond)
+              for f, methods in DENOISE_BEYOND_CONFIGS]
     scenes = GALLERY_SCENES[:1] if quick else GALLERY_SCENES
     gallery = [Point(f"gallery/{name}.xml", {"res": res or (24 if quick else 128), "spp": spp},
-                     spp, settings, group=name) for name in scenes]
+                     spp, settings + beyond, group=name) for name in scenes]
     return Experiment("denoise", "The MRT against the full render denoised by Intel Open "
                       "Image Denoise", "spp", "spp", [fig1, *gallery], kind="denoise",
                       methods=DENOISE_METHODS[1:2] if quick else DENOISE_METHODS,

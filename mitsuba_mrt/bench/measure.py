@@ -669,7 +669,9 @@ class DenoiseRunner(PointRunner):
     :data:`~.experiments.OIDN_QUALITIES` (that same full render, denoised
     with and without the ``aov`` integrator's albedo and normal at 1 spp,
     their render and the denoising timed into the total); every MRT method
-    at every setting (without and with ``denoise``). Warm-up, alternating
+    at every setting (without and with ``denoise``), at the ladder's spp or
+    at the setting's own (:attr:`~.experiments.Setting.ladder`, which may go
+    beyond the ladder's top). Warm-up, alternating
     rounds (more where the ladder's full renders are fast) and the converged
     reference are those of :class:`PointRunner`.
 
@@ -685,9 +687,10 @@ class DenoiseRunner(PointRunner):
 
     @staticmethod
     def ticks(experiment: Experiment, point: Point, methods: list, repeats: int) -> int:
-        ladder = len(experiment.ladder) or 1
-        pairs = setting_pairs(point, [m for m in methods if m != FULL])
-        per_round = ladder * (1 + len(pairs))
+        ladder = tuple(experiment.ladder) or (point.spp,)
+        per_round = len(ladder) + sum(
+            len(point.settings[s].ladder or ladder)
+            for s, _ in setting_pairs(point, [m for m in methods if m != FULL]))
         return per_round * (repeats + DENOISE_WARMUP_ROUNDS) + 1
 
     def run(self, keep_images_for: int | None = None) -> tuple[list, None]:
@@ -695,15 +698,20 @@ class DenoiseRunner(PointRunner):
 
         self._load()
         self.sampler = sampler_spp(self.scene, self.point.spp)[0]
-        taken = {s: sampler_spp(self.scene, s)[1] for s in self.ladder_asked}
-        self.ladder = sorted(set(taken.values()))
-        self.skipped_ticks = len(self.ladder_asked) - len(self.ladder)
+
+        def taken(asked):
+            return sorted({sampler_spp(self.scene, n)[1] for n in asked})
+
+        self.ladder = taken(self.ladder_asked)
         self.full_at = {spp: Runs(spp=spp) for spp in self.ladder}
         self.oidn = {(m, q, spp): Runs(spp=spp) for spp in self.ladder
                      for m in (OIDN, OIDN_NOAUX) for q in OIDN_QUALITIES}
         self.mrt = {(s, m, spp): Runs(spp=spp)
                     for s, m in setting_pairs(self.point, self.mrt_methods)
-                    for spp in self.ladder}
+                    for spp in taken(self.point.settings[s].ladder or self.ladder_asked)}
+        per_round = len(self.ladder) + len(self.mrt)
+        skipped = self.ticks(self.exp, self.point, self.mrt_methods, self.repeats) - 1 - (
+            per_round * (self.repeats + DENOISE_WARMUP_ROUNDS))
         self.failed = {}
         for _ in range(DENOISE_WARMUP_ROUNDS):
             self._round(warm=True)
@@ -716,8 +724,7 @@ class DenoiseRunner(PointRunner):
             rounds += 1
         self.converged = self._converged_reference()
         self.tick()
-        per_round = 1 + len(setting_pairs(self.point, self.mrt_methods))
-        for _ in range(self.skipped_ticks * per_round * (self.repeats + DENOISE_WARMUP_ROUNDS)):
+        for _ in range(skipped):
             self.tick()  # the spp the sampler rounded onto another
         for key, status in self.failed.items():
             print(f"warning: {key[1]} at {self.point.scene} spp={key[-1]}: {status}",

@@ -733,7 +733,11 @@ def plot_denoise(rows, path, experiment: Experiment) -> None:
     fig.legend(handles=list(handles.values()) + extra,
                labels=list(handles) + [h.get_label() for h in extra],
                loc="center right", fontsize=6, frameon=False)
+    beyond = sorted({int(_num(p[2]["spp"])) for curves in scenes.values()
+                     for pts in curves.values() for p in pts} - set(experiment.ladder))
     fig.suptitle(f"{experiment.name}: {experiment.title}; each curve: spp "
-                 f"{', '.join(str(s) for s in experiment.ladder)}", fontsize=8)
+                 f"{', '.join(str(s) for s in experiment.ladder)}"
+                 + (f" (some MRT curves also {', '.join(map(str, beyond))})" if beyond else ""),
+                 fontsize=8)
     fig.tight_layout(rect=(0, 0, 1 - 1.6 / (3.2 * cols + 1.8), 1))
     _save(fig, path)

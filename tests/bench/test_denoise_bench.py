@@ -30,6 +30,14 @@ def test_the_experiment_covers_fig1_and_the_gallery():
         "mrt-fast+oidn-balanced")
     assert experiments.denoised_mode("mrt-fast+oidn-balanced") == ("mrt-fast", "+oidn-balanced")
     assert experiments.denoised_name("mrt-fast", fig1.settings[0].params) == "mrt-fast"
+    # the gallery also runs the configurations closest to the full render's error
+    # beyond 64 spp, under the same labels (so on the same curves); Fig. 1 does not
+    assert all(not s.ladder for s in fig1.settings)
+    beyond = gallery[0].settings[len(fig1.settings):]
+    assert gallery[0].settings[:len(fig1.settings)] == fig1.settings
+    assert [(s.label, s.methods, s.ladder) for s in beyond] == [
+        ("f=0.1, denoise=oidn", ("mrt-refine", "mrt-idpass"), (128, 256)),
+        ("f=0.2, denoise=oidn", ("mrt-fast",), (128, 256))]
     assert "denoise" in experiments.EXPERIMENTS
 
 
@@ -77,6 +85,40 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
     assert "paper_fig1: sampler `stratified`, spp 1, 4" in md
     assert (tmp_path / "denoise.png").read_bytes()[:4] == b"\x89PNG"
     assert (tmp_path / "cache" / "paper_fig1_24_64.npy").is_file()
+    # the gallery's scene: fast+oidn at f=0.2 once more beyond the ladder's top, on
+    # the same curve, timed against the same full render
+    gallery = [r for r in rows if r["scene"] == "gallery/checker_border.xml"
+               and r["setting"] != measure.NOISE_FREE]
+    assert sorted(int(r["spp"]) for r in gallery if r["method"] == "full") == [1, 4]
+    beyond = [r for r in gallery if int(r["spp"]) == 8]
+    assert [(r["method"], r["setting"]) for r in beyond] == [
+        ("mrt-fast+oidn", "f=0.2, denoise=oidn")]
+    for column in ("total_s", "relative_time", "error_converged"):
+        assert math.isfinite(float(beyond[0][column]))
+    curve = report.denoise_curves(rows)["checker_border"]["mrt-fast+oidn f=0.2"]
+    assert [int(p[2]["spp"]) for p in curve] == [1, 4, 8]
+
+
+@pytest.mark.parametrize("scene, defines, beyond", [
+    ("paper_fig1.xml", {"integrator": "path", "jitter": "true"}, 9),  # stratified: 2 -> 4
+    ("gallery/cornell.xml", {}, 8),
+])
+def test_the_progress_bar_ends_at_its_total(scene, defines, beyond):
+    """Every tick counted up front is made, where the sampler rounds spp and where a
+    setting goes beyond the ladder's top (the quick one: 8 spp)."""
+    pytest.importorskip("pyoidn")
+    exp = experiments.build_experiment("denoise", quick=True, res=12)
+    exp.ladder = (1, 2)
+    base = exp.points[1].settings
+    point = experiments.Point(scene, {"res": 12, "spp": 2, **defines}, 2,
+                              [base[0], base[-1]], group="x")
+    methods = ["full", "mrt-fast"]
+    ticks = []
+    runner = measure.DenoiseRunner(exp, point, methods, 1, SCENES, measure.MemoryMeter(),
+                                   {}, lambda: ticks.append(1), min_seconds=0.0)
+    rows, _ = runner.run()
+    assert len(ticks) == measure.DenoiseRunner.ticks(exp, point, methods, 1)
+    assert [r.spp for r in rows if r.method == "mrt-fast+oidn"] == [beyond]
 
 
 def _rows(curves):
