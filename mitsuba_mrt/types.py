@@ -136,8 +136,10 @@ class SparseTrace:
         False when light visibility was known without shadow rays (no
         point or spot light, or a single sphere or planar shape).
     path_id : ndarray of int64, shape (n,), optional
-        The chain of shapes met along specular (mirror) bounces, encoded
-        as one integer (equal to ``shape_index`` without mirrors).
+        The chain of shapes met along specular (mirror) bounces, the shape
+        hit inside an instance's group and the side of the surface seen
+        (front or back), encoded as one integer (equal to ``shape_index``
+        without mirrors and instances, on the front of a surface).
     alpha : ndarray, shape (n,), optional
         Alpha as ``mi.render`` develops it: the share of the pixel's samples
         whose camera ray hit something (None where radiance was not traced).

@@ -12,7 +12,10 @@ is unoccluded from the hit point).  Two rules turn them into integer ids:
     equals shape k + 1 with none.
 ``exact``
     ``(shape_index << 32) | visible_lights``: one id per (shape, set of
-    visible lights) pair, never colliding.
+    visible lights) pair, never colliding.  The trace passes its
+    ``path_id`` as ``shape_index`` here: the shape, and the shapes met
+    through mirrors, the shape inside an instance's group and the side of
+    the surface seen (:meth:`~mitsuba_mrt.types.SparseTrace.ids`).
 """
 
 from __future__ import annotations

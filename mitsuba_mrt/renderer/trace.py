@@ -738,11 +738,34 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
     return _read_sums(sums, pixel_xy)
 
 
+#: What :func:`_with_side` folds into the path id of a surface seen from its back.
+_BACK_SIDE = 0x5EED
+
+
+def _with_side(path: np.ndarray, back: np.ndarray) -> np.ndarray:
+    """``path`` ids told apart by the side of the surface seen.
+
+    The inside and the outside of an open shape (a cup's wall, a sheet seen
+    from both sides) are one shape, yet their light differs across the rim;
+    where ``back`` (the ray meets the surface from behind its shading normal:
+    the side a ``twosided`` material flips to, and that a one-sided one
+    leaves black) is set, a constant is folded into the path id, in 31 bits
+    as :func:`_with_inner_shapes` folds.  A closed shape seen from outside
+    is seen from its front, but for a few pixels at the silhouette of a
+    coarse smooth-shaded mesh, which the material also sees from behind.
+    """
+    if not back.any():
+        return path
+    out = path.copy()
+    out[back] = (path[back] * 1000003 + _BACK_SIDE) % ((1 << 31) - 1)
+    return out
+
+
 def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     """Shape, visible lights and mirror chain of every pixel's centre ray."""
     n = len(pixel_xy)
     layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
-    mask, pointers, inner, chain, normal = _IDS(
+    mask, pointers, inner, chain, normal, back = _IDS(
         scene, sensor, lights, _aligned_float(pixel_xy[:, 0]), _aligned_float(pixel_xy[:, 1]),
         layout, objects=(scene, sensor), record=replay)
     keys, indices = lookup
@@ -760,14 +783,15 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
              for bounced, ptr in chain]
     path = _with_inner_shapes(_path_ids(shape_index, steps, len(keys)),
                               _to_numpy(inner, n).astype(np.int64))
+    path = _with_side(path, _to_numpy(back, n).astype(bool))
     return shape_index, _to_numpy(mask, n).astype(np.uint32), path, _to_numpy(normal, n)
 
 
 def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
     """The kernel of :func:`_ids_jit`: (visible-light mask, shape pointers,
     the pointer of the shape inside an instance's group (0 elsewhere), mirror
-    chain, shading normal) of each pixel's centre ray, every input an
-    argument as :func:`_develop_kernel`'s."""
+    chain, shading normal, whether the surface is seen from its back) of each
+    pixel's centre ray, every input an argument as :func:`_develop_kernel`'s."""
     _, rule, mirrors, _ = layout
     position = mi.Point2f(pixel_x + 0.5, pixel_y + 0.5)
     ray, _ = _camera_ray(sensor, None, position, 1, centre=True)  # no random numbers
@@ -776,8 +800,9 @@ def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
     instance = dr.reinterpret_array(mi.UInt32, si.instance)
     inner = dr.select(instance != 0, dr.reinterpret_array(mi.UInt32, si.shape), 0)
     normal = dr.select(valid, si.sh_frame.n, 0.0)
-    dr.eval(mask, pointers, inner, chain, normal)
-    return mask, pointers, inner, chain, normal
+    back = valid & (dr.dot(si.sh_frame.n, ray.d) > 0.0)
+    dr.eval(mask, pointers, inner, chain, normal, back)
+    return mask, pointers, inner, chain, normal, back
 
 
 def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=False):
@@ -789,6 +814,7 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
     mirrors = has_mirrors(scene)
     steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
     inner = np.zeros(n, dtype=np.int64)
+    back = np.zeros(n, dtype=bool)
     for k, (x, y) in enumerate(pixel_xy.tolist()):
         ray, _ = _camera_ray(sensor, sampler, mi.Point2f(x + 0.5, y + 0.5), 1, centre=True)
         si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
@@ -797,9 +823,11 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
             inner[k] = si.shape.ptr if si.instance is not None else 0
             visible[k] = int(mask)
             normal[k] = np.asarray(si.sh_frame.n, dtype=np.float64)
+            back[k] = float(dr.dot(si.sh_frame.n, ray.d)) > 0.0
             for b, (_, shape) in enumerate(chain):
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
-    path = _with_inner_shapes(_path_ids(shape_index, steps, len(lookup)), inner)
+    path = _with_side(_with_inner_shapes(_path_ids(shape_index, steps, len(lookup)), inner),
+                      back)
     return shape_index, visible, path, normal
 
 

@@ -264,3 +264,46 @@ def test_every_pixel_is_recognised_in_any_order_and_only_once():
     twice[3] = twice[4]
     assert not _every_pixel(twice, 5, 4)
     assert not _every_pixel(xy, 4, 5) and not _every_pixel(xy[:-1], 5, 4)
+
+
+# An open cup (a two-sided tube) seen from above: its far wall from inside (the
+# back of the surface), its near wall from outside; a closed ball beside it.
+OPEN_CUP = """
+  <shape type="obj" id="a_cup">
+    <string name="filename" value="{mesh}"/>
+    <transform name="to_world"><translate x="-1.2" y="-1" z="0"/></transform>
+    <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.7, 0.5"/></bsdf></bsdf>
+  </shape>
+  <shape type="sphere" id="b_ball"><point name="center" x="1.5" y="0" z="0"/><float name="radius" value="1"/>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.3, 0.8"/></bsdf></shape>
+  <emitter type="point"><point name="position" x="0" y="6" z="3"/><rgb name="intensity" value="80"/></emitter>"""
+
+
+@pytest.mark.parametrize("scalar", [False, True])
+def test_an_open_shapes_inside_and_outside_are_two_regions(variant, scalar):
+    from conftest import small_scene_xml
+
+    mesh = ROOT / "scenes_xml" / "gallery" / "meshes" / "tube.obj"
+    xml = small_scene_xml(40, extra=OPEN_CUP.format(mesh=mesh), shapes=False,
+                          lights=False).replace('origin="0, 0, 8"', 'origin="0, 5, 6"')
+    try:
+        if scalar:
+            mi.set_variant("scalar_rgb")
+        trace = mitsuba_mrt.render(mi.load_string(xml), mode="paper",
+                                   sample_fraction=1.0).trace
+    finally:
+        mi.set_variant(variant)
+    cup, ball = trace.shape_index == 1, trace.shape_index == 2
+    assert cup.sum() > 100 and ball.sum() > 100
+    sides = np.unique(trace.path_id[cup])
+    assert len(sides) == 2  # inside and outside
+    inside = trace.path_id == sides[sides != 1][0]
+    outside = cup & ~inside
+    assert inside.sum() > 20 and outside.sum() > 20
+    # the inside is seen above the outside (the far wall over the near one) ...
+    rows = np.arange(40).repeat(40)
+    assert np.median(rows[inside]) < np.median(rows[outside])
+    assert set(trace.path_id[outside]) == {1}  # the front keeps the shape's own id
+    assert set(trace.path_id[ball]) == {2}  # a closed shape is seen from its front only
+    assert len(np.unique(trace.ids("exact")[cup])) >= 2
+    assert len(np.unique(trace.ids("paper")[cup & (trace.visible_lights == 1)])) == 1
