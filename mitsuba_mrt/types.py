@@ -49,7 +49,9 @@ class MRTParams:
         Polynomial degree added to the linear RBF (-1: the report's).
     denoise : {'none', 'oidn'}
         Denoise the traced grid before reconstructing it (``oidn``: Intel
-        Open Image Denoise, with the trace's albedo and normals).
+        Open Image Denoise, with the trace's albedo and normals); ``refine``
+        then denoises its whole image once more, as its edge pixels are
+        traced at the full spp.
     denoise_quality : {'fast', 'balanced', 'high'}
         OIDN's quality preset for ``denoise="oidn"``: ``balanced`` and
         ``high`` run a larger network than ``fast``, slower and usually more

@@ -59,8 +59,9 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--rbf-degree", type=int, choices=(-1, 0, 1), default=None,
                    help="polynomial added to the linear RBF; -1 is the report's (-1)")
     g.add_argument("--denoise", choices=DENOISERS, default=None,
-                   help="denoise the traced grid before reconstructing it; oidn: Intel Open "
-                        "Image Denoise (pip install mitsuba-mrt[denoise]) (none)")
+                   help="denoise the traced grid before reconstructing it (and refine's "
+                        "whole image after); oidn: Intel Open Image Denoise "
+                        "(pip install mitsuba-mrt[denoise]) (none)")
     g.add_argument("--denoise-quality", choices=DENOISE_QUALITIES, default=None,
                    help="OIDN's quality preset with --denoise oidn (fast)")
 

@@ -38,6 +38,12 @@ MODES = {
 #: Modes that need a tracer (they trace pixels beyond the grid).
 TRACING_MODES = ("refine", "idpass")
 
+#: Modes whose image, with ``denoise``, is denoised once more as a whole after
+#: the reconstruction: the pixels they trace beyond the grid (``refine``'s
+#: edges and rough cells, a fifth to two fifths of an ordinary scene's pixels)
+#: carry the noise of their spp, which the grid's denoising does not reach.
+OUTPUT_DENOISED_MODES = ("refine",)
+
 #: Modes whose grid is smoothed within the noise first (``params.noise_smoothing``);
 #: ``paper`` stays the report's, the baselines plain.
 SMOOTHED_MODES = ("fast", "refine", "idpass")

@@ -19,12 +19,12 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError
-from ..modes import check_mode, reconstruct
+from ..modes import OUTPUT_DENOISED_MODES, check_mode, reconstruct
 from ..recon.sampling import SamplePattern, grid_pattern
 from ..types import (MRTParams, SeedStream, Skips, SparseTrace, Timings, TracedCounts,
                      check_radiance)
 from ..recon.compose import region_values
-from ..recon.denoise import denoise_grid, textured_pixels
+from ..recon.denoise import denoise_grid, denoise_image, textured_pixels
 from . import auto
 from .scene import resolve_sensor, unwrap
 from .trace import diffuse_shapes, is_jit, trace_pixels
@@ -179,6 +179,10 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         alpha[: len(band)] = pilot.band.alpha.reshape(pilot.band_height, width)
         recon.traced_mask[: len(band)] = True
         traced.band = int(recon.traced_mask.sum()) - before
+    if params.denoise != "none" and used in OUTPUT_DENOISED_MODES:
+        begin = time.perf_counter()
+        recon.image = denoise_image(recon.image, quality=params.denoise_quality)
+        timings.denoise += time.perf_counter() - begin
     timings.trace_more += recon.timings.trace_more
     timings.edges, timings.interpolate = recon.timings.edges, recon.timings.interpolate
     skips = recon.skips

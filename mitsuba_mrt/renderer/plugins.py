@@ -126,7 +126,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
      * - denoise
        - |string|
        - ``oidn``: denoise the traced grid with Intel Open Image Denoise before
-         reconstructing it (needs ``pip install mitsuba-mrt[denoise]``) (Default: none).
+         reconstructing it, and ``refine``'s whole image after (needs
+         ``pip install mitsuba-mrt[denoise]``) (Default: none).
      * - denoise_quality
        - |string|
        - OIDN's quality with ``denoise`` ``oidn``: ``fast``, or ``balanced`` and ``high``,

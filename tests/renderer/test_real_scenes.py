@@ -243,6 +243,28 @@ def test_denoising_a_dark_texture_does_not_magnify_its_error(variant):
     assert paper_error(denoised.image, converged) < paper_error(plain.image, converged)
 
 
+def test_refines_pixels_traced_beyond_the_grid_are_denoised_too(variant):
+    # refine traces its edge pixels at the scene's spp, as noisy as a full
+    # render's; with denoise they go through OIDN with the rest of the image
+    pytest.importorskip("pyoidn")
+    scene = mi.load_string(path_scene(res=64, spp=4))
+    converged = np.mean([mitsuba_mrt.render_reference(scene, spp=256, seed=100 + k)[0]
+                         for k in range(2)], axis=0)
+    plain, denoised = (mitsuba_mrt.render(scene, mode="refine", denoise=d)
+                       for d in ("none", "oidn"))
+    # pixels both traced beyond the grid (which cells are rough depends on the grid's values)
+    edges = plain.traced_mask & denoised.traced_mask
+    edges[np.ix_(plain.pattern.rows, plain.pattern.cols)] = False
+    assert edges.sum() > 100
+    assert paper_error(denoised.image[edges], converged[edges]) < 0.8 * paper_error(
+        plain.image[edges], converged[edges])
+    assert denoised.timings.denoise > 0
+    # fast traces nothing beyond the grid: its grid pixels keep the grid's denoised values
+    fast = mitsuba_mrt.render(scene, mode="fast", denoise="oidn")
+    grid = fast.image[np.ix_(fast.pattern.rows, fast.pattern.cols)].reshape(-1, 3)
+    assert np.allclose(grid, fast.trace.radiance)
+
+
 def test_one_sample_per_pixel_has_no_variance_and_no_smoothing(variant):
     # the float32 sums leave ~1e-7 of rounding in second moment - mean^2; a
     # single deterministic sample has no noise, so nothing is smoothed
