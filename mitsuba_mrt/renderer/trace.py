@@ -338,6 +338,11 @@ def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
     return first, first_valid, mask, chain
 
 
+def _fold(path: np.ndarray, digit) -> np.ndarray:
+    """``digit`` folded into ``path`` ids by a hash that keeps them in 31 bits."""
+    return (path * 1000003 + digit) % ((1 << 31) - 1)
+
+
 def _path_ids(shape_index: np.ndarray, steps: list, num_shapes: int) -> np.ndarray:
     """One integer per pixel for the chain of shapes along its mirror bounces.
 
@@ -349,7 +354,7 @@ def _path_ids(shape_index: np.ndarray, steps: list, num_shapes: int) -> np.ndarr
     base = num_shapes + 2
     fits = base ** (len(steps) + 1) < (1 << 31)
     for step in steps:
-        path = path * base + step if fits else (path * 1000003 + step) % ((1 << 31) - 1)
+        path = path * base + step if fits else _fold(path, step)
     return path
 
 
@@ -363,8 +368,8 @@ def _with_inner_shapes(path: np.ndarray, inner: np.ndarray) -> np.ndarray:
 
     An instance is one listed shape, but its group may hold several (a cup
     and the ball in it): where ``inner`` (the address of the shape hit inside
-    the group, 0 elsewhere) is set, its number is folded into the path id,
-    in 31 bits by a hash as :func:`_path_ids` folds long chains.  Numbers
+    the group, 0 elsewhere) is set, its number is folded into the path id
+    (:func:`_fold`, as :func:`_path_ids` folds long chains).  Numbers
     stay fixed for the process, so ids agree between the traces of a render.
     """
     hit = inner != 0
@@ -374,7 +379,7 @@ def _with_inner_shapes(path: np.ndarray, inner: np.ndarray) -> np.ndarray:
     numbers = np.array([_inner_shapes.setdefault(int(a), len(_inner_shapes) + 1)
                         for a in addresses], dtype=np.int64)
     out = path.copy()
-    out[hit] = (path[hit] * 1000003 + numbers[which]) % ((1 << 31) - 1)
+    out[hit] = _fold(path[hit], numbers[which])
     return out
 
 
@@ -749,20 +754,20 @@ def _with_side(path: np.ndarray, back: np.ndarray) -> np.ndarray:
     from both sides) are one shape, yet their light differs across the rim;
     where ``back`` (the ray meets the surface from behind its shading normal:
     the side a ``twosided`` material flips to, and that a one-sided one
-    leaves black) is set, a constant is folded into the path id, in 31 bits
-    as :func:`_with_inner_shapes` folds.  A closed shape seen from outside
+    leaves black) is set, a constant is folded into the path id
+    (:func:`_fold`).  A closed shape seen from outside
     is seen from its front, but for a few pixels at the silhouette of a
     coarse smooth-shaded mesh, which the material also sees from behind.
     """
     if not back.any():
         return path
     out = path.copy()
-    out[back] = (path[back] * 1000003 + _BACK_SIDE) % ((1 << 31) - 1)
+    out[back] = _fold(path[back], _BACK_SIDE)
     return out
 
 
 def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
-    """Shape, visible lights and mirror chain of every pixel's centre ray."""
+    """Shape, visible lights, mirror chain and side of every pixel's centre ray."""
     n = len(pixel_xy)
     layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
     mask, pointers, inner, chain, normal, back = _IDS(

@@ -12,7 +12,7 @@ import pytest
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import paper_error
 
-from conftest import ROOT
+from conftest import ROOT, small_scene_xml
 
 
 def path_scene(res=24, rfilter="", rgba=False, spp=16, extra=""):
@@ -303,8 +303,6 @@ OPEN_CUP = """
 
 @pytest.mark.parametrize("scalar", [False, True])
 def test_an_open_shapes_inside_and_outside_are_two_regions(variant, scalar):
-    from conftest import small_scene_xml
-
     mesh = ROOT / "scenes_xml" / "gallery" / "meshes" / "tube.obj"
     xml = small_scene_xml(40, extra=OPEN_CUP.format(mesh=mesh), shapes=False,
                           lights=False).replace('origin="0, 0, 8"', 'origin="0, 5, 6"')
@@ -322,7 +320,7 @@ def test_an_open_shapes_inside_and_outside_are_two_regions(variant, scalar):
     inside = trace.path_id == sides[sides != 1][0]
     outside = cup & ~inside
     assert inside.sum() > 20 and outside.sum() > 20
-    # the inside is seen above the outside (the far wall over the near one) ...
+    # the inside (the far wall, seen through the opening) lies above the outside
     rows = np.arange(40).repeat(40)
     assert np.median(rows[inside]) < np.median(rows[outside])
     assert set(trace.path_id[outside]) == {1}  # the front keeps the shape's own id
