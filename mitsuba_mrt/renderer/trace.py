@@ -755,15 +755,11 @@ def _with_side(path: np.ndarray, back: np.ndarray) -> np.ndarray:
     where ``back`` (the ray meets the surface from behind its shading normal:
     the side a ``twosided`` material flips to, and that a one-sided one
     leaves black) is set, a constant is folded into the path id
-    (:func:`_fold`).  A closed shape seen from outside
-    is seen from its front, but for a few pixels at the silhouette of a
-    coarse smooth-shaded mesh, which the material also sees from behind.
+    (:func:`_fold`).  A closed shape seen from outside is seen from its
+    front, but for a few pixels at the silhouette of a coarse smooth-shaded
+    mesh, which the material also sees from behind.
     """
-    if not back.any():
-        return path
-    out = path.copy()
-    out[back] = _fold(path[back], _BACK_SIDE)
-    return out
+    return np.where(back, _fold(path, _BACK_SIDE), path)
 
 
 def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
