@@ -64,13 +64,19 @@ def main():
     parser.add_argument("--cache", default="docs/bench/cache")
     args = parser.parse_args()
 
+    names = args.scenes.split(",")
+    for name in names:  # every scene's converged reference, before any rendering
+        res = 400 if name == "paper_fig1" else 128
+        if not (Path(args.cache) / f"{name}_{res}_{FACTOR * 64}.npy").is_file():
+            parser.exit(2, f"denoised_base.py: no converged reference of {name!r} in "
+                           f"{args.cache}: run `python -m mitsuba_mrt bench denoise` first\n")
     mitsuba_mrt.activate("auto")
     from mitsuba_mrt.recon.denoise import denoise_image
     from mitsuba_mrt.renderer.guides import render_guides
 
     print("error against converged; idpass 64 spp: plain / denoise | denoised base + grid "
           "(min-max of 8) | base alone (4 spp)")
-    for name in args.scenes.split(","):
+    for name in names:
         scene, res = load(name)
         reference = np.load(Path(args.cache) / f"{name}_{res}_{FACTOR * 64}.npy")
         albedo, normal, _ = render_guides(scene)
