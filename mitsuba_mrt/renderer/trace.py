@@ -460,7 +460,7 @@ class _Developed:
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True, replay: bool = False,
-                 pad: bool = False) -> SparseTrace:
+                 pad: bool = False, box: bool = False) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -494,6 +494,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         next size of :func:`.replay.padded_size`'s few, recorded once and
         replayed after.  The pixels' values are those of the set traced
         unpadded: Mitsuba's samplers seed each sample by its index.
+    box : bool
+        Develop the samples with a box pixel filter instead of the film's:
+        every pixel from the samples inside it alone, so that no two pixels
+        share a sample (what a denoiser wants of a full render).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -503,7 +507,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         size = padded_size(n)
         padded = np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], size - n, axis=0)])
         return trace_pixels(scene, sensor, integrator, padded, spp, seed, aovs, radiance,
-                            replay=True).take(slice(0, n))
+                            replay=True, box=box).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
@@ -516,11 +520,11 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         develop = _develop_jit if is_jit() else _develop_scalar
         if radiance:
             samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs,
-                              replay)
+                              replay, box)
         elif aovs:
             sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
             samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
-                              seed, True, replay)
+                              seed, True, replay, box)
         if aovs:
             shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
                 scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
@@ -594,7 +598,8 @@ def _aligned_float(values: np.ndarray):
     return mi.Float(out)
 
 
-def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay):
+def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
+                 box=False):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -604,13 +609,13 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
-    table = filter_table(film.rfilter())
+    table = filter_table(box_filter() if box else film.rfilter())
     n = len(pixel_xy)
     every = _every_pixel(pixel_xy, width, height)
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
-              float(table.radius), len(table.pdf))
+              float(table.radius), len(table.pdf), bool(box))
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(pixel_xy[:, 0]),
                     _aligned_float(pixel_xy[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), layout,
@@ -633,9 +638,10 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
     also its outputs, and the sampler's state after the samples would cost
     a second kernel over every lane to write back.
     """
-    n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells = layout
+    (n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells,
+     box) = layout
     film = sensor.film()
-    rfilter = film.rfilter()
+    rfilter = box_filter() if box else film.rfilter()
     cell = 2.0 * radius / cells
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
@@ -682,7 +688,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
     # Evaluate once: each reduction below would otherwise re-run the integrator.
     dr.eval(values)
     if every:
-        block = _new_block(film)
+        block = _new_block(film, rfilter)
         block.put(position + mi.ScalarVector2f(crop_offset), values, active)
         return block.tensor()
     sums = [dr.block_sum(value, spp) for value in values]
@@ -690,21 +696,33 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
     return sums
 
 
-def _new_block(film) -> mi.ImageBlock:
+def _new_block(film, rfilter) -> mi.ImageBlock:
     return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
-                         channel_count=_CHANNELS, rfilter=film.rfilter(), border=False)
+                         channel_count=_CHANNELS, rfilter=rfilter, border=False)
+
+
+#: The box pixel filter of each variant, made on first use.
+_BOX_FILTERS: dict = {}
+
+
+def box_filter():
+    """Mitsuba's ``box`` reconstruction filter (radius half a pixel) in the active variant."""
+    rfilter = _BOX_FILTERS.get(mi.variant())
+    if rfilter is None:
+        rfilter = _BOX_FILTERS[mi.variant()] = mi.load_dict({"type": "box"})
+    return rfilter
 
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                    replay=False):
+                    replay=False, box=False):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
-    rfilter = film.rfilter()
+    rfilter = box_filter() if box else film.rfilter()
     table = filter_table(rfilter)
     every = _every_pixel(pixel_xy, width, height)
     offset = mi.ScalarVector2f(film.crop_offset())
-    block = _new_block(film) if every else None
+    block = _new_block(film, rfilter) if every else None
     sums = np.zeros((len(pixel_xy), _CHANNELS))
     for k, (x, y) in enumerate(pixel_xy.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
