@@ -61,6 +61,13 @@ class MRTParams:
         value with the neighbours of its id that agree with it within this
         many noise standard deviations (the trace's own variance) before
         interpolating; traced pixels keep their traced value; 0: off.
+    time_limit : float or None
+        Mode ``auto``: seconds the whole render may take, its pilot
+        included; the plan is the most accurate that fits (None: no limit).
+    noise_threshold : float or None
+        Mode ``auto``: the largest estimated relative RMS error accepted;
+        the plan is the cheapest that meets it (None: a full render's own
+        at the scene's spp, or, with ``time_limit`` alone, the best in time).
     """
 
     sample_fraction: float = 0.1
@@ -73,6 +80,8 @@ class MRTParams:
     denoise: str = "none"
     denoise_quality: str = "fast"
     noise_smoothing: float = 1.5
+    time_limit: float | None = None
+    noise_threshold: float | None = None
 
     def __post_init__(self):
         check_fraction("sample_fraction", self.sample_fraction)
@@ -97,6 +106,11 @@ class MRTParams:
         if not (math.isfinite(self.noise_smoothing) and self.noise_smoothing >= 0):
             raise MRTError(f"noise_smoothing must be a finite number >= 0, "
                            f"got {self.noise_smoothing}")
+        for name in ("time_limit", "noise_threshold"):
+            value = getattr(self, name)
+            if value is not None and not (isinstance(value, (int, float))
+                                          and math.isfinite(value) and value > 0):
+                raise MRTError(f"{name} must be a finite number > 0, got {value}")
 
     def rule_for(self, mode: str) -> str:
         """The id rule in force for ``mode`` (``auto`` resolved)."""
@@ -194,11 +208,11 @@ class SparseTrace:
 class Timings:
     """Seconds spent per stage; ``other`` makes the parts add up to ``total``.
 
-    ``trace`` is the grid's trace (the pilot's, for ``auto``); ``trace_more``
-    every pixel traced beyond the grid (edges for ``refine``, the id pass and
-    thin regions for ``idpass``, ``auto``'s full-width band); ``check``
-    ``auto``'s accuracy check on that band; ``full_render`` the full render
-    that ``auto`` may fall back to.
+    ``trace`` is the grid's trace (every pixel's, for a denoised full
+    render); ``trace_more`` every pixel traced beyond the grid (edges for
+    ``refine``, the id pass and thin regions for ``idpass``); ``check``
+    ``auto``'s pilot; ``full_render`` the full render that ``auto`` may
+    choose.
     """
 
     trace: float = 0.0
@@ -223,19 +237,18 @@ class Timings:
 class TracedCounts:
     """Pixels traced with the nested integrator, by why they were traced.
 
-    ``grid`` the sample grid's; ``band`` ``auto``'s full-width pilot rows
-    beyond the grid; ``more`` the mode's own beyond both (edges for
-    ``refine``, thin regions for ``idpass``); ``full`` a full render's.
+    ``grid`` the sample grid's; ``more`` the mode's own beyond the grid
+    (edges for ``refine``, thin regions for ``idpass``); ``full`` a full
+    render's (``auto``'s pilot keeps none of the pixels it traces).
     """
 
     grid: int = 0
-    band: int = 0
     more: int = 0
     full: int = 0
 
     @property
     def total(self) -> int:
-        return self.grid + self.band + self.more + self.full
+        return self.grid + self.more + self.full
 
 
 @dataclass
@@ -319,6 +332,10 @@ class SeedStream(enum.IntEnum):
     ID_PASS = 3
     SLIVERS = 4
     ROUGH = 5
+    #: ``auto``'s pilot: its two reference halves, then its 1-spp traces
+    #: (``LADDER + k`` for the k-th)
+    REFERENCE = 6
+    LADDER = 16
 
 
 class Tracer(Protocol):

@@ -40,6 +40,11 @@ _PARAM_OPTIONS = (
     ("num_cappoints", int, "brightest and darkest capstones per id"),
     ("noise_smoothing", float, "in fast, refine and idpass, average traced grid values "
                                "that agree within this many noise sigmas; 0: off"),
+    ("time_limit", float, "mode auto: seconds the whole render may take, its pilot "
+                          "included; the most accurate plan that fits"),
+    ("noise_threshold", float, "mode auto: the largest estimated relative RMS error "
+                               "accepted; the cheapest plan that meets it (default: a full "
+                               "render's own at the scene's spp)"),
 )
 
 
@@ -52,7 +57,7 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
         "else the value shown)")
     for name, kind, text in _PARAM_OPTIONS:
         g.add_argument("--" + name.replace("_", "-"), type=kind, default=None,
-                       help=f"{text} ({getattr(d, name)})")
+                       help=f"{text} ({getattr(d, name) if getattr(d, name) is not None else 'none'})")
     g.add_argument("--id-rule", choices=("auto", "paper", "exact"), default=None,
                    help="paper: shape + 0.5 per blocked light; exact: never collides; "
                         "auto: paper in mode paper, exact elsewhere (auto)")
@@ -88,9 +93,9 @@ def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) ->
                         help="print the JSON summary" + (" of every task" if batch else ""))
     parser.add_argument("--mode", default=None, metavar="MODE",
                         help="reconstruction mode: " + ", ".join(_modes())
-                             + "; auto: refine or idpass when a measured pilot says it beats "
-                               "a full render, else the full render (default: the scene's mrt "
-                               "integrator's mode, else auto)")
+                             + "; auto: the plan a measured pilot picks: a full render, the "
+                               "same denoised with OIDN, or an MRT mode (default: the scene's "
+                               "mrt integrator's mode, else auto)")
     _add_mrt_options(parser)
 
 
@@ -127,9 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="the report's experiments: MRT against the full render "
                        "and the baselines (CSV, plots, markdown tables)")
-    b.add_argument("experiment", choices=(*EXPERIMENTS, "all"),
+    b.add_argument("experiment", choices=(*EXPERIMENTS, "rival", "all"),
                    help="which experiment (gallery: every mode on the ordinary scenes of "
-                        "scenes_xml/gallery; all: every one, into the same folder)")
+                        "scenes_xml/gallery; rival: auto against full renders denoised with "
+                        "OIDN; all: every one but rival, into the same folder)")
     b.add_argument("-o", "--output", default="out/bench",
                    help="output folder (default %(default)s)")
     b.add_argument("--quick", action="store_true",
@@ -211,6 +217,8 @@ def _bench(args) -> int:
     from ..bench import run_experiment, summary_line
 
     command = "python -m mitsuba_mrt " + shlex.join(args.argv)
+    if args.experiment == "rival":
+        return _rival(args, command)
     with contextlib.ExitStack() as stack:
         map_points = None
         if args.scheduler or args.workers is not None:
@@ -225,6 +233,28 @@ def _bench(args) -> int:
                                  map_points=map_points)
     for name, result in results.items():
         print(summary_line(name, result))
+    return 0
+
+
+def _rival(args, command: str) -> int:
+    from pathlib import Path
+
+    from ..bench.experiments import GALLERY_SCENES
+    from ..bench.rival import run_rival
+    from ..renderer.variants import activate
+
+    activate(args.variant)
+    root = Path(args.scenes) if args.scenes else Path(__file__).resolve().parents[2] / "scenes_xml"
+    res = args.res or (64 if args.quick else 256)
+    scenes = [(root / "gallery" / f"{name}.xml", name, {"res": res})
+              for name in (GALLERY_SCENES[:2] if args.quick else GALLERY_SCENES)]
+    scenes.append((root / "paper_fig1.xml", "paper_fig1",
+                   {"res": 64 if args.quick else 400, "integrator": "path", "spp": 64,
+                    "jitter": "true"}))
+    table = run_rival(args.output, scenes, repeats=args.repeats or (1 if args.quick else 2),
+                      quick=args.quick, command=command,
+                      echo=lambda line: print(line, file=sys.stderr))
+    print(f"rival: table {table}")
     return 0
 
 

@@ -43,9 +43,10 @@ class RunSummary:
     """What a render job did, as written to ``<stem>.json``.
 
     ``reference_time_s``, ``relative_time``, ``error`` and ``psnr_db`` are
-    None without a reference; when the MRT rendered in full (``auto`` chose
-    it), the image is the full render: there is no second reference, the
-    time is its own and the error None.
+    None without a reference; when ``auto`` chose ``mi.render``'s own full
+    render, there is no second reference, the time is its own and the
+    error None.  ``auto`` is the plan: its candidates with their predicted
+    seconds and errors, the choice and why.
     """
 
     scene: str
@@ -78,17 +79,14 @@ class RunSummary:
 
 def _why(result) -> str:
     """Why the mode that ran was chosen, in a few words."""
-    decision = result.auto
-    if decision is None:
+    plan = result.auto
+    if plan is None:
         return "asked for"
-    if decision.reason == "pilot":
-        ratio = decision.predicted_mrt_s / decision.predicted_full_s
-        return f"auto: the pilot predicted {ratio:.2f} of a full render"
-    if decision.reason == "inaccurate":
-        return "auto: the MRT was fast enough but less accurate on the pilot's band"
-    return {"small": "auto: too few samples for the MRT to pay off",
-            "scalar": "auto: the scalar variant renders in full"}.get(decision.reason,
-                                                                     decision.reason)
+    choice = plan.choice
+    text = f"auto: {choice.label}, {plan.reason}"
+    if plan.candidates:
+        text += f" (predicted {choice.seconds:.2f} s, error {choice.error:.4f})"
+    return text
 
 
 def run_render_job(job: RenderJob) -> RunSummary:
@@ -115,7 +113,8 @@ def run_render_job(job: RenderJob) -> RunSummary:
     full = result.mode_used == "full"
     reference = None
     if job.reference and not full:
-        reference, seconds = render_reference(scene, spp=result.spp, seed=job.seed)
+        # at the scene's (or the job's) spp: a plan may trace fewer
+        reference, seconds = render_reference(scene, spp=job.spp, seed=job.seed)
         # (the reference's alpha is the film's; only RGB is compared and written)
     summary = RunSummary(
         scene=os.fspath(job.scene), variant=variant, width=width, height=height,
@@ -159,14 +158,14 @@ def summary_line(summary: RunSummary) -> str:
     """One terminal line: what was traced and why, where the time went, the error."""
     s, t, traced = summary, summary.timings, summary.traced
     pixels = s.width * s.height
-    parts = [f"{n} {label}" for n, label in ((traced.grid, "grid"), (traced.band, "pilot band"),
+    parts = [f"{n} {label}" for n, label in ((traced.grid, "grid"),
                                              (traced.more, _more_label(s.mode_used)),
                                              (traced.full, "full render")) if n]
     line = (f"{Path(s.scene).stem}: {s.width}x{s.height}, mode {s.mode_used} ({s.why}); "
             f"traced {' + '.join(parts) or 'nothing'} = "
             f"{100.0 * traced.total / pixels:.1f}% of the pixels; "
             f"{t.total:.3f} s = trace {t.trace:.3f} + more {t.trace_more:.3f}"
-            f"{f' + accuracy check {t.check:.3f}' if t.check else ''}"
+            f"{f' + pilot {t.check:.3f}' if t.check else ''}"
             f"{f' + denoise {t.denoise:.3f}' if t.denoise else ''}"
             f" + edges {t.edges:.3f} + interpolate {t.interpolate:.3f}"
             f"{f' + full render {t.full_render:.3f}' if t.full_render else ''}"

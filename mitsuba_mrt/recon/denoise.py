@@ -59,6 +59,15 @@ def _pyoidn():
     return pyoidn
 
 
+def oidn_available() -> bool:
+    """Whether Intel Open Image Denoise can be used (``pyoidn`` imports and loads)."""
+    try:
+        _pyoidn()
+    except MRTError:
+        return False
+    return True
+
+
 def _check(device, what: str) -> None:
     error = device.get_error()
     if error:

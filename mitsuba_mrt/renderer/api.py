@@ -19,15 +19,17 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError
-from ..modes import OUTPUT_DENOISED_MODES, check_mode, reconstruct
+from ..modes import check_mode
+from ..modes.plan import Plan
+from ..recon.compose import region_values
+from ..recon.denoise import denoise_image
 from ..recon.sampling import SamplePattern, grid_pattern
 from ..types import (MRTParams, SeedStream, Skips, SparseTrace, Timings, TracedCounts,
                      check_radiance)
-from ..recon.compose import region_values
-from ..recon.denoise import denoise_grid, denoise_image, textured_pixels
 from . import auto
+from .pipeline import mrt_image
 from .scene import resolve_sensor, unwrap
-from .trace import diffuse_shapes, is_jit, trace_pixels
+from .trace import is_jit, trace_pixels
 
 
 @dataclass
@@ -42,7 +44,7 @@ class MRTResult:
         Region id of every pixel.
     traced_mask : ndarray of bool, shape (height, width)
     pattern : SamplePattern or None
-        The traced grid; None when ``auto`` rendered in full without a pilot.
+        The traced grid; None when ``auto`` rendered in full.
     trace : SparseTrace
         Radiance and AOVs of the grid's pixels.
     params : MRTParams
@@ -52,14 +54,14 @@ class MRTResult:
         The mode asked for (``auto`` or one of :data:`mitsuba_mrt.modes.MODES`).
     mode_used : str
         The mode that ran: ``mode`` itself, or what ``auto`` chose (``full``
-        for a full render).
+        for ``mi.render``'s image, ``full+oidn`` for a denoised full render).
     timings : Timings
     skips : Skips
         Shortcuts the scene allowed.
     stats : dict
         Counts of the reconstruction (``regions``, ``edge_pixels``, ...).
-    auto : AutoDecision or None
-        What ``auto`` chose and why.
+    auto : Plan or None
+        What ``auto`` chose, among which candidates, and why.
     traced : TracedCounts
         Pixels traced with the nested integrator, by why.
     alpha : ndarray, shape (height, width), or None
@@ -79,7 +81,7 @@ class MRTResult:
     timings: Timings = field(default_factory=Timings)
     skips: Skips = field(default_factory=Skips)
     stats: dict = field(default_factory=dict)
-    auto: auto.AutoDecision | None = None
+    auto: Plan | None = None
     traced: TracedCounts = field(default_factory=TracedCounts)
     alpha: np.ndarray | None = None
 
@@ -98,9 +100,9 @@ class GridTracer:
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
-                 pad: bool = False) -> SparseTrace:
+                 pad: bool = False, box: bool = False) -> SparseTrace:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
-                            self.seed + int(stream), aovs, radiance, replay, pad)
+                            self.seed + int(stream), aovs, radiance, replay, pad, box)
 
 
 def _check_spp(spp: int | None) -> int | None:
@@ -127,13 +129,15 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     params : MRTParams, optional
         Default: those of the scene's ``mrt`` integrator, else the defaults.
     mode : str, optional
-        ``auto``: ``refine`` or ``idpass``, whichever a measured pilot
-        predicts cheaper, when it beats a full render, otherwise the full
-        render itself (see ``mode_used``); or any key of
+        ``auto``: the plan a measured pilot picks (:mod:`.auto`): a full
+        render (``mi.render``'s own image), the same with a box filter
+        through OIDN, or an MRT mode, under ``time_limit`` and
+        ``noise_threshold`` (see ``mode_used`` and ``auto``); or any key of
         :data:`mitsuba_mrt.modes.MODES` (``paper``, ``fast``, ...).
         Default: the scene's ``mrt`` integrator's mode, else ``auto``.
     **param_overrides
-        Fields of :class:`MRTParams` (``sample_fraction=0.05`` ...).
+        Fields of :class:`MRTParams` (``sample_fraction=0.05``,
+        ``time_limit=2.0`` ...).
     """
     start = time.perf_counter()
     wrapper = unwrap(scene, integrator)
@@ -143,112 +147,75 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
-    if mode == "auto":
-        decision = auto.decide_without_pilot(width, height, spp, is_jit())
-        if decision is not None:  # decided before any grid work: a plain full render
-            image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, spp, seed)
-            return _full_result(image, alpha, None, None, _empty_trace(spp), params, spp,
-                                decision, Timings(full_render=seconds), start)
     pattern = grid_pattern(width, height, params.sample_fraction)
-    timings = Timings()
-    decision = pilot = None
+    plan = None
     if mode == "auto":
-        decision, pilot = auto.decide(pattern, tracer, params)
-        if decision.mode_used == "full":
-            return _rest_in_full(pattern, pilot, tracer, params, spp, decision, start)
-        trace = auto.rest_of_grid(pattern, pilot, tracer)
-        timings.trace_more, timings.check = pilot.band.seconds, decision.check_s
-    else:
-        trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
-    used = decision.mode_used if decision else mode
-    timings.trace = trace.seconds
-    if params.denoise != "none":
-        begin = time.perf_counter()
-        trace = _denoised(scene, pattern, trace, params)
-        timings.denoise = time.perf_counter() - begin
+        plan = (auto.plan_without_pilot(width, height, spp, is_jit(), params)
+                or auto.plan(scene, pattern, tracer, params, start))
+        choice = plan.choice
+        if choice.kind == "full":
+            image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, choice.spp, seed)
+            return _full_result(image, alpha, params, choice, plan,
+                                Timings(check=plan.pilot_s, full_render=seconds), start)
+        if choice.kind == "denoised":
+            return _denoised_full(replace(tracer, spp=choice.spp), params, plan, start)
+        mode = choice.mode
+        params = params.with_(denoise="oidn" if choice.denoise else "none")
+    return _mrt(pattern, tracer, params, mode, plan, start)
 
-    recon = reconstruct(pattern, trace, params, used, tracer)
-    traced = TracedCounts(grid=pattern.count, more=int(recon.traced_mask.sum()) - pattern.count)
-    alpha = region_values(recon.ids, trace.ids(params.rule_for(used)), trace.alpha, "mean")
+
+def _mrt(pattern: SamplePattern, tracer: GridTracer, params: MRTParams, mode: str,
+         plan: Plan | None, start: float) -> MRTResult:
+    """The MRT's pipeline: trace the grid, denoise, reconstruct, finish."""
+    trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
+    made = mrt_image(tracer.scene, pattern, trace, params, mode, tracer)
+    recon = made.recon
+    alpha = region_values(recon.ids, trace.ids(params.rule_for(mode)), trace.alpha, "mean")
     pattern.put_traced(alpha, trace.alpha)
-    if pilot is not None:  # auto's pilot traced these rows in full: keep them
-        band = pilot.band.radiance.reshape(pilot.band_height, width, 3)
-        check_radiance(band, "pilot pixels")
-        before = int(recon.traced_mask.sum())
-        recon.image[: len(band)] = band
-        alpha[: len(band)] = pilot.band.alpha.reshape(pilot.band_height, width)
-        recon.traced_mask[: len(band)] = True
-        traced.band = int(recon.traced_mask.sum()) - before
-    if params.denoise != "none" and used in OUTPUT_DENOISED_MODES:
-        begin = time.perf_counter()
-        recon.image = denoise_image(recon.image, quality=params.denoise_quality)
-        timings.denoise += time.perf_counter() - begin
-    timings.trace_more += recon.timings.trace_more
-    timings.edges, timings.interpolate = recon.timings.edges, recon.timings.interpolate
+    timings = Timings(trace=trace.seconds, trace_more=recon.timings.trace_more,
+                      check=plan.pilot_s if plan else 0.0, denoise=made.denoise_s,
+                      edges=recon.timings.edges, interpolate=recon.timings.interpolate)
     skips = recon.skips
     skips.shadow_rays = int(not trace.shadow_rays)
-    return MRTResult(recon.image, recon.ids, recon.traced_mask, pattern, trace, params,
-                     trace.spp, mode, used, timings.close(time.perf_counter() - start),
-                     skips, dict(recon.stats), decision, traced, alpha)
+    traced = TracedCounts(grid=pattern.count, more=int(recon.traced_mask.sum()) - pattern.count)
+    return MRTResult(recon.image, recon.ids, recon.traced_mask, pattern, made.trace, params,
+                     trace.spp, "auto" if plan else mode, mode,
+                     timings.close(time.perf_counter() - start), skips, dict(recon.stats),
+                     plan, traced, alpha)
 
 
-def _denoised(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
-              params: MRTParams) -> SparseTrace:
-    """``trace`` with its radiance denoised as the grid image it forms, the
-    shading alone on textured diffuse surfaces, and the pixels whose samples
-    all agreed kept: the background's, and a surface's if not black (all of
-    its samples may have missed the light); at 1 spp none can tell."""
-    grid = pattern.grid_shape + (3,)
-    normal = None if trace.normal is None else trace.normal.reshape(grid)
-    textured = textured_pixels(trace.shape_index, trace.albedo, diffuse_shapes(scene))
-    exact = None
-    if trace.variance is not None and trace.spp > 1:
-        exact = ((trace.variance == 0.0).all(axis=1)
-                 & ((trace.radiance > 0.0).any(axis=1) | (trace.shape_index == 0)))
-        exact = exact.reshape(pattern.grid_shape)
-    radiance = denoise_grid(trace.radiance.reshape(grid), trace.albedo.reshape(grid), normal,
-                            params.denoise, params.denoise_quality,
-                            textured=textured.reshape(pattern.grid_shape), exact=exact)
-    return replace(trace, radiance=np.asarray(radiance, dtype=np.float64).reshape(-1, 3))
+def _denoised_full(tracer: GridTracer, params: MRTParams, plan: Plan, start: float) -> MRTResult:
+    """Every pixel traced with a box pixel filter, its albedo and normals the
+    guides, through OIDN: the denoised full render of ``auto``'s plan."""
+    width, height = (int(v) for v in tracer.sensor.film().crop_size())
+    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    trace = tracer(xy, stream=SeedStream.GRID, replay=True, box=True)
+    check_radiance(trace.radiance, "pixels")
+    begin = time.perf_counter()
+    image = denoise_image(*(v.reshape(height, width, 3)
+                            for v in (trace.radiance, trace.albedo, trace.normal)),
+                          quality=params.denoise_quality)
+    timings = Timings(trace=trace.seconds, check=plan.pilot_s,
+                      denoise=time.perf_counter() - begin)
+    ids = trace.ids(params.rule_for("fast")).reshape(height, width)
+    alpha = None if trace.alpha is None else trace.alpha.reshape(height, width)
+    return MRTResult(image, ids, np.ones((height, width), dtype=bool), None, trace, params,
+                     trace.spp, "auto", "full+oidn", timings.close(time.perf_counter() - start),
+                     auto=plan, traced=TracedCounts(full=width * height), alpha=alpha)
+
+
+def _full_result(image, alpha, params, choice, plan, timings, start) -> MRTResult:
+    height, width = image.shape[:2]
+    return MRTResult(image, np.zeros((height, width), dtype=np.int64),
+                     np.ones((height, width), dtype=bool), None, _empty_trace(choice.spp),
+                     params, choice.spp, "auto", "full",
+                     timings.close(time.perf_counter() - start), auto=plan,
+                     traced=TracedCounts(full=height * width), alpha=alpha)
 
 
 def _empty_trace(spp: int) -> SparseTrace:
     return SparseTrace(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64),
                        np.zeros(0, np.uint32), 0, spp, 0.0)
-
-
-def _full_result(image, alpha, ids, pattern, trace, params, spp, decision, timings,
-                 start) -> MRTResult:
-    height, width = image.shape[:2]
-    ids = np.zeros((height, width), dtype=np.int64) if ids is None else ids
-    return MRTResult(image, ids, np.ones((height, width), dtype=bool), pattern, trace, params,
-                     spp, "auto", "full", timings.close(time.perf_counter() - start),
-                     auto=decision, traced=TracedCounts(full=height * width), alpha=alpha)
-
-
-def _rest_in_full(pattern: SamplePattern, pilot: auto.Pilot, tracer: GridTracer,
-                  params: MRTParams, spp: int, decision: auto.AutoDecision,
-                  start: float) -> MRTResult:
-    """The full render that ``auto`` falls back to after a pilot.
-
-    The pilot's band is kept and the remaining rows are traced the same way
-    (each pixel's samples placed and weighted by the film's filter), so the
-    pilot is not wasted.  Ids are not traced per pixel: the pilot's grid ids
-    are nearest-filled.
-    """
-    width, height = pattern.width, pattern.height
-    rest_xy = np.stack(np.meshgrid(np.arange(width), np.arange(pilot.band_height, height)),
-                       -1).reshape(-1, 2)
-    rest = tracer(rest_xy, stream=SeedStream.REST, aovs=False, replay=True)
-    image = np.concatenate([pilot.band.radiance, rest.radiance]).reshape(height, width, 3)
-    alpha = np.concatenate([pilot.band.alpha, rest.alpha]).reshape(height, width)
-    check_radiance(image, "pixels")
-    sub = SamplePattern(width, height, pattern.rows[pilot.rows], pattern.cols)
-    ids = sub.nearest_image(pilot.grid.ids(params.rule_for("fast")))
-    timings = Timings(trace=pilot.grid.seconds, check=decision.check_s,
-                      full_render=pilot.band.seconds + rest.seconds)
-    return _full_result(image, alpha, ids, pattern, pilot.grid, params, spp, decision, timings,
-                        start)
 
 
 def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *,

@@ -137,10 +137,18 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - In ``fast``, ``refine`` and ``idpass``: average each traced grid value with
          the samples of its id nearby that agree with it within this many standard
          deviations of the trace's noise, before interpolating; 0: off (Default: 1.5).
+     * - time_limit
+       - |float|
+       - Mode ``auto``: seconds the whole render may take, its pilot included;
+         the most accurate plan that fits (Default: none).
+     * - noise_threshold
+       - |float|
+       - Mode ``auto``: the largest estimated relative RMS error accepted; the
+         cheapest plan that meets it (Default: a full render's own at the scene's spp).
      * - mode
        - |string|
-       - Reconstruction: ``auto`` (``refine`` or ``idpass`` when a pilot
-         predicts it beats a full render, else the full render), ``paper``,
+       - ``auto``: the plan a measured pilot picks (a full render, the same
+         denoised with OIDN, or an MRT mode); or a reconstruction: ``paper``,
          ``fast``, ``refine``, ``idpass``, ``nearest``, ``bicubic`` (Default: auto).
      * - aovs
        - |bool|
@@ -168,8 +176,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
             raise MRTError(f"mrt: unknown properties {', '.join(unknown)} (give them to the "
                            f"nested integrator)")
         # Reconstruction parameters, validated once here.
-        self.params = MRTParams(**{name: type(f.default)(props[name])
-                                   for name, f in own.items() if name in names})
+        self.params = MRTParams(**{name: (float if f.default is None else type(f.default))(
+            props[name]) for name, f in own.items() if name in names})
         # Reconstruction mode (see mitsuba_mrt.renderer.api.render).
         self.mode = str(props.get("mode", "auto"))
         # Whether mi.render returns the id AOVs after R, G, B.

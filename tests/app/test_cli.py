@@ -47,7 +47,7 @@ def test_render_writes_every_output(tmp_path):
 def test_auto_in_full_renders_once_and_says_so(tmp_path):
     proc = run_cli("render", SCENES / "paper_fraction.xml", "-o", tmp_path, "-D", "res=32")
     assert proc.returncode == 0, proc.stderr
-    assert "mode full (auto: too few samples" in proc.stdout and "PSNR" not in proc.stdout
+    assert "mode full (auto: full @ 1 spp, too few samples" in proc.stdout and "PSNR" not in proc.stdout
     summary = json.loads((tmp_path / "paper_fraction.json").read_text())
     assert summary["mode_used"] == "full" and summary["error"] is None
     assert summary["reference_time_s"] == summary["timings"]["full_render"] > 0

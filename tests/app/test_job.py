@@ -14,11 +14,11 @@ def summary(timings: Timings) -> RunSummary:
 def test_summary_line_names_every_part_of_the_time_that_was_spent():
     line = summary_line(summary(Timings(trace=0.5, trace_more=0.1, check=0.2, denoise=0.04,
                                         interpolate=0.1).close(1.0)))
-    assert "1.000 s = trace 0.500 + more 0.100 + accuracy check 0.200 + denoise 0.040" in line
+    assert "1.000 s = trace 0.500 + more 0.100 + pilot 0.200 + denoise 0.040" in line
     assert line.endswith("+ other 0.060 [llvm_ad_rgb]")
 
 
 def test_summary_line_leaves_out_the_parts_a_run_did_not_have():
     line = summary_line(summary(Timings(trace=0.5, interpolate=0.1).close(1.0)))
-    assert "accuracy check" not in line and "denoise" not in line and "full render" not in line
+    assert "pilot" not in line and "denoise" not in line and "full render" not in line
     assert "traced 16 grid + 4 at edges = 20.0% of the pixels" in line

@@ -1,0 +1,261 @@
+"""Mode ``auto``: the planner on synthetic numbers, the pilot, and the plan's execution."""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import mitsuba_mrt
+from mitsuba_mrt import MRTError, MRTParams
+from mitsuba_mrt.modes.plan import Candidate, Plan, choose
+from mitsuba_mrt.renderer import auto, pilot
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def scene_xml(res: int, spp: int = 8, rfilter: str = "box") -> str:
+    """A diffuse ball on a plane under an area light, path traced: noisy, as real scenes are."""
+    return f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 8" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/>
+      <rfilter type="{rfilter}"/></film>
+  </sensor>
+  <shape type="sphere"><float name="radius" value="1"/>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf></shape>
+  <shape type="rectangle">
+    <transform name="to_world"><scale value="20"/><translate z="-1.5"/></transform>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf></shape>
+  <shape type="sphere"><point name="center" x="2" y="3" z="4"/><float name="radius" value="0.5"/>
+    <emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>
+</scene>"""
+
+
+# -- the planner, on synthetic costs and errors ------------------------------------------------
+
+CANDIDATES = [Candidate("full", "full", 64, seconds=1.0, error=0.10),
+              Candidate("full", "full", 16, seconds=0.25, error=0.20),
+              Candidate("full+oidn", "denoised", 2, denoise=True, seconds=0.12, error=0.09),
+              Candidate("full+oidn", "denoised", 8, denoise=True, seconds=0.30, error=0.06),
+              Candidate("refine+oidn", "mrt", 64, mode="refine", denoise=True, seconds=0.45,
+                        error=0.05, compile_s=0.5)]
+
+
+def test_the_planner_takes_the_cheapest_that_meets_the_target():
+    assert choose(CANDIDATES, target_error=0.10).choice is CANDIDATES[2]
+    assert choose(CANDIDATES, target_error=0.07).choice is CANDIDATES[3]
+    assert choose(CANDIDATES, target_error=0.05).choice is CANDIDATES[4]
+
+
+def test_where_none_meets_the_target_the_planner_takes_the_most_accurate():
+    plan = choose(CANDIDATES, target_error=0.01)
+    assert plan.choice is CANDIDATES[4] and "most accurate" in plan.reason
+
+
+def test_under_a_time_limit_the_planner_takes_the_best_that_fits():
+    # compilation counts against a limit: refine+oidn's 0.45 + 0.5 s does not fit 0.5 s
+    assert choose(CANDIDATES, time_limit=0.5).choice is CANDIDATES[3]
+    assert choose(CANDIDATES, time_limit=1.0).choice is CANDIDATES[4]
+    # a target within the limit: the cheapest that meets it
+    assert choose(CANDIDATES, time_limit=1.0, target_error=0.09).choice is CANDIDATES[2]
+
+
+def test_a_limit_nothing_fits_gives_the_cheapest_and_says_so():
+    plan = choose(CANDIDATES, time_limit=0.01)
+    assert plan.choice is CANDIDATES[2] and plan.reason.startswith("nothing fits")
+
+
+def test_the_planner_needs_a_candidate():
+    with pytest.raises(MRTError, match="at least one candidate"):
+        choose([])
+
+
+@pytest.mark.parametrize("name", ["time_limit", "noise_threshold"])
+@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf, "soon"])
+def test_bad_controls_are_one_line_errors(name, value):
+    with pytest.raises(MRTError, match=f"^{name} must be a finite number > 0"):
+        MRTParams(**{name: value})
+
+
+# -- the pilot and the plan's execution -------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def scene(variant):
+    return mi.load_string(scene_xml(512))  # 2^18 pixels x 8 spp: a pilot runs
+
+
+def test_the_pilot_measures_every_kind_of_candidate(scene):
+    result = mitsuba_mrt.render(scene, time_limit=1e6)  # no pruning: the MRT is measured too
+    plan = result.auto
+    kinds = {c.kind for c in plan.candidates}
+    assert kinds == {"full", "denoised", "mrt"}
+    assert all(c.seconds > 0 and c.error >= 0 for c in plan.candidates)
+    fulls = sorted((c for c in plan.candidates if c.kind == "full"), key=lambda c: c.spp)
+    # a full render's error is its noise: it halves as the spp quadruple
+    assert fulls[-1].spp == 8 and fulls[0].spp == 1
+    assert fulls[0].error == pytest.approx(fulls[-1].error * math.sqrt(8), rel=1e-9)
+    # more samples through the denoiser: no worse by more than the estimate's noise
+    denoised = sorted((c for c in plan.candidates if c.kind == "denoised"), key=lambda c: c.spp)
+    assert [c.spp for c in denoised] == [1, 2, 4, 8]
+    assert denoised[-1].error < 1.1 * denoised[0].error
+    assert plan.pilot_s > 0 and plan.pilot_pixels > 0
+    assert result.timings.check == plan.pilot_s
+
+
+def test_the_pilots_errors_follow_the_truth(scene):
+    # a denoised 1-spp render beats a plain 1-spp render, as the pilot predicts
+    plan = mitsuba_mrt.render(scene, time_limit=1e6).auto
+    by = {(c.name, c.spp): c for c in plan.candidates}
+    truth = mitsuba_mrt.render_reference(scene, spp=256)[0]
+
+    def rel(image):
+        shown = (truth <= 1).all(axis=-1)
+        return float(np.sqrt(np.mean((np.clip(image, 0, 1) - truth)[shown] ** 2)
+                             / np.mean(truth[shown] ** 2)))
+
+    plain = rel(mitsuba_mrt.render_reference(scene, spp=1, seed=7)[0])
+    assert by[("full", 1)].error == pytest.approx(plain, rel=0.25)
+    assert by[("full+oidn", 1)].error < by[("full", 1)].error
+
+
+def test_a_full_render_the_planner_chooses_is_mi_renders_own(scene, monkeypatch):
+    def pick_full(candidates, **_):
+        return Plan(next(c for c in candidates if c.kind == "full" and c.spp == 8), "test")
+
+    monkeypatch.setattr(auto, "choose", pick_full)
+    result = mitsuba_mrt.render(scene, seed=3)
+    image = np.array(mi.render(scene, seed=3), dtype=np.float64)[..., :3]
+    assert result.mode_used == "full" and result.auto.reason == "test"
+    assert np.array_equal(result.image, image)
+
+
+def test_a_denoised_full_render_traces_every_pixel_and_denoises(scene, monkeypatch):
+    def pick(candidates, **_):
+        return Plan(next(c for c in candidates if c.kind == "denoised" and c.spp == 2), "test")
+
+    monkeypatch.setattr(auto, "choose", pick)
+    result = mitsuba_mrt.render(scene)
+    assert result.mode_used == "full+oidn" and result.spp == 2
+    assert result.traced.full == 512 * 512 and result.timings.denoise > 0
+    truth = mitsuba_mrt.render_reference(scene, spp=128)[0]
+    noisy = mitsuba_mrt.render_reference(scene, spp=2)[0]
+    assert np.mean((result.image - truth) ** 2) < 0.5 * np.mean((noisy - truth) ** 2)
+
+
+def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
+    def pick(candidates, **_):
+        return Plan(next(c for c in candidates if c.name == "fast+oidn"), "test")
+
+    monkeypatch.setattr(auto, "choose", pick)
+    result = mitsuba_mrt.render(scene, time_limit=1e6)
+    assert result.mode == "auto" and result.mode_used == "fast"
+    assert result.params.denoise == "oidn" and result.timings.denoise > 0
+
+
+def test_a_time_limit_below_the_pilot_gives_the_cheapest_and_says_so(scene):
+    result = mitsuba_mrt.render(scene, time_limit=1e-6)
+    plan = result.auto
+    assert plan.reason.startswith("nothing fits the time limit")
+    assert plan.budget_s == 0.0 and plan.time_limit == 1e-6
+    assert plan.choice.seconds == min(c.seconds for c in plan.candidates)
+
+
+def test_without_oidn_the_plan_has_no_denoising_and_a_note(scene, monkeypatch):
+    monkeypatch.setattr(pilot, "oidn_available", lambda: False)
+    plan = mitsuba_mrt.render(scene, time_limit=1e6).auto
+    assert plan.candidates and not any(c.denoise for c in plan.candidates)
+    assert any("Open Image Denoise is not installed" in note for note in plan.notes)
+
+
+def test_a_noise_threshold_is_met_by_the_choice(scene):
+    plan = mitsuba_mrt.render(scene, noise_threshold=0.5).auto
+    assert plan.target_error == 0.5 and plan.choice.error <= 0.5
+    cheaper = [c for c in plan.candidates if c.seconds < plan.choice.seconds]
+    assert all(c.error > 0.5 for c in cheaper)
+
+
+def test_small_jobs_render_in_full_without_a_pilot(variant):
+    scene = mi.load_string(scene_xml(32))
+    result = mitsuba_mrt.render(scene)
+    reference, _ = mitsuba_mrt.render_reference(scene)
+    assert result.mode_used == "full" and not result.auto.candidates
+    assert "too few samples" in result.auto.reason
+    assert np.array_equal(result.image, reference)
+
+
+def test_the_scalar_variant_renders_in_full(variant):
+    try:
+        mi.set_variant("scalar_rgb")
+        result = mitsuba_mrt.render(mi.load_string(scene_xml(16)))
+    finally:
+        mi.set_variant(variant)
+    assert result.mode_used == "full" and "scalar" in result.auto.reason
+
+
+def test_strips_run_from_grid_row_to_grid_row():
+    from mitsuba_mrt.recon.sampling import grid_pattern
+
+    p = grid_pattern(400, 400, 0.1)
+    strips = pilot.strips_of(p)
+    assert len(strips) == pilot.STRIP_COUNT
+    for s in strips:
+        assert s.height >= pilot.STRIP_MIN_ROWS
+        assert p.rows[s.grid_rows[0]] == s.top and p.rows[s.grid_rows[-1]] == s.top + s.height - 1
+    assert strips[0].top + strips[0].height <= strips[1].top
+
+
+def test_a_box_filters_samples_are_its_pixels_own(variant):
+    class Box:
+        def radius(self):
+            return 0.5
+
+        def eval(self, x):
+            return 1.0
+
+    class Gaussian:
+        def radius(self):
+            return 2.0
+
+        def eval(self, x):
+            return math.exp(-2.0 * x * x)
+
+    assert pilot.effective_area(Box()) == pytest.approx(1.0, rel=1e-6)
+    # Mitsuba's gaussian (stddev 0.5): each sample reaches pi pixels' worth
+    assert pilot.effective_area(Gaussian()) == pytest.approx(math.pi, rel=1e-3)
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "mitsuba_mrt", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_the_json_lists_the_plan(tmp_path, variant):
+    path = tmp_path / "ball.xml"
+    path.write_text(scene_xml(512))
+    proc = run_cli("render", path, "-o", tmp_path / "out", "--no-reference", "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    plan = summary["auto"]
+    assert summary["mode"] == "auto" and plan["choice"]["name"] in summary["why"]
+    assert plan["target_error"] > 0 and plan["time_limit"] is None
+    for candidate in plan["candidates"]:
+        assert set(candidate) == {"name", "kind", "spp", "mode", "denoise", "seconds", "error",
+                                  "compile_s"}
+
+
+@pytest.mark.parametrize("option", ["--time-limit", "--noise-threshold"])
+@pytest.mark.parametrize("value", ["0", "-2", "nan"])
+def test_bad_control_values_exit_2_with_one_line(tmp_path, option, value):
+    proc = run_cli("render", ROOT / "scenes_xml" / "paper_fig1.xml", "-o", tmp_path, option, value)
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1 and "must be a finite number > 0" in proc.stderr
+    assert not any(tmp_path.iterdir())
