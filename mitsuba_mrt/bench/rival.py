@@ -1,0 +1,224 @@
+"""``bench rival``: ``auto`` against what a careful user does instead.
+
+The alternative: every pixel at a few spp with a box pixel filter, through
+Intel Open Image Denoise with albedo and normal guides from the same
+samples, along an spp ladder (its time-error curve).  Per scene this
+experiment measures, warm and alternating in one process (median of the
+repeats): the full render at the scene's spp (time 1), the alternative's
+ladder, the default ``auto``, ``auto`` under time limits of
+:data:`LIMITS` of the full render, and each MRT configuration.  Errors are
+against converged renders (:data:`CONVERGED_SPP`): the film's own filter
+for the full render and the MRT, a box filter for the denoised renders.
+Then, at ``auto``'s own time, the alternative's error (interpolated on its
+curve) and the best configuration's in hindsight.
+"""
+
+from __future__ import annotations
+
+import csv
+import statistics
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..modes.plan import Candidate, Plan
+from ..recon.metrics import paper_error
+from ..types import MRTParams
+
+#: spp of the alternative's ladder.
+LADDER = (1, 2, 4, 8, 16, 32, 64)
+#: ``auto --time-limit`` as shares of the full render's time.
+LIMITS = (0.1, 0.25, 0.5)
+#: The MRT configurations measured beside ``auto``: (mode, denoise).
+CONFIGS = tuple((m, d) for d in ("none", "oidn") for m in ("fast", "refine", "idpass"))
+#: Samples per pixel of the converged renders errors are measured against
+#: (rendered as several passes of 64 averaged).
+CONVERGED_SPP = 1024
+QUICK_CONVERGED_SPP = 256
+
+
+@dataclass
+class Row:
+    """One method on one scene."""
+
+    scene: str
+    method: str
+    spp: int
+    seconds: float
+    relative_time: float
+    error: float
+    rel_mse: float
+    chose: str = ""
+
+
+def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
+    """The field's relative MSE: ``mean((x - r)^2 / (r^2 + 0.01))`` over pixels and channels.
+
+    Examples
+    --------
+    >>> rel_mse(np.ones((1, 1, 3)), np.ones((1, 1, 3)))
+    0.0
+    """
+    return float(np.mean((image - reference) ** 2 / (reference ** 2 + 0.01)))
+
+
+def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarray:
+    """The mean of passes of 64 spp over every pixel (box-filtered with ``box``)."""
+    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    passes = max(1, spp // 64)
+    one = replace(tracer, spp=min(spp, 64))
+    total = sum(one(xy, stream=100 + k, aovs=False, replay=True, box=box).radiance
+                for k in range(passes))
+    return (total / passes).reshape(height, width, 3)
+
+
+def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool) -> list[Row]:
+    """Every method of the module on one scene, as :class:`Row` s."""
+    from ..renderer.api import GridTracer, _denoised_full, render, render_reference
+    from ..renderer.scene import load_scene, unwrap
+
+    scene = load_scene(path, **defines)
+    sensor = scene.sensors()[0]
+    width, height = (int(v) for v in sensor.film().crop_size())
+    spp = int(sensor.sampler().sample_count())
+    nested = unwrap(scene, None).nested
+    tracer = GridTracer(scene, sensor, nested, spp, 0)
+    converged_spp = QUICK_CONVERGED_SPP if quick else CONVERGED_SPP
+    truth = {"film": _converged(tracer, width, height, converged_spp, False),
+             "box": _converged(tracer, width, height, converged_spp, True)}
+    ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
+
+    def alternative(s):
+        plan = Plan(Candidate("full+oidn", "denoised", s, denoise=True), "the bench's")
+        return lambda: _denoised_full(replace(tracer, spp=s), MRTParams(), plan,
+                                      time.perf_counter())
+
+    methods = {"full": lambda: render_reference(scene, spp=spp)}
+    methods.update({f"oidn@{s}": alternative(s) for s in ladder})
+    methods["auto"] = lambda: render(scene, mode="auto")
+    for m, d in CONFIGS:
+        methods[f"{m}+{d}" if d != "none" else m] = (
+            lambda m=m, d=d: render(scene, mode=m, denoise=d))
+    outputs, times = {}, {k: [] for k in methods}
+    for k, run in methods.items():  # warm-up: kernels compiled, caches filled
+        outputs[k] = run()
+    for _ in range(repeats):  # alternating rounds
+        for k, run in methods.items():
+            begin = time.perf_counter()
+            outputs[k] = run()
+            times[k].append(time.perf_counter() - begin)
+    full_s = statistics.median(times["full"])
+    for share in LIMITS:  # each limit is relative to this process's full render
+        key = f"auto --time-limit {share}"
+        runs = []
+        for _ in range(max(repeats, 1)):
+            begin = time.perf_counter()
+            out = render(scene, mode="auto", time_limit=share * full_s)
+            runs.append(time.perf_counter() - begin)
+        outputs[key], times[key] = out, runs
+    rows = []
+    for k, out in outputs.items():
+        image, used = (out[0], "full") if isinstance(out, tuple) else (out.image, out.mode_used)
+        kind = "box" if used == "full+oidn" else "film"
+        seconds = statistics.median(times[k])
+        chose = ""
+        if not isinstance(out, tuple) and out.auto is not None:
+            chose = out.auto.choice.label
+        rows.append(Row(name, k, spp if k == "full" else int(out.spp), seconds,
+                        seconds / full_s, paper_error(image, truth[kind]),
+                        rel_mse(image, truth[kind]), chose))
+    return rows
+
+
+def at_time(rows: list[Row], prefix: str, seconds: float) -> float:
+    """The error of the methods named ``prefix...`` at ``seconds``, interpolated
+    on their curve (log time, log error); their extreme beyond its ends."""
+    curve = sorted((r.relative_time, r.error) for r in rows if r.method.startswith(prefix))
+    t = np.log([c[0] for c in curve])
+    e = np.log([max(c[1], 1e-12) for c in curve])
+    return float(np.exp(np.interp(np.log(seconds), t, e)))
+
+
+def verdicts(rows: list[Row]) -> list[dict]:
+    """Per scene: default ``auto``'s error against the alternative's at its time and
+    the best configuration's in hindsight, and each time limit's outcome."""
+    out = []
+    for scene in dict.fromkeys(r.scene for r in rows):
+        mine = [r for r in rows if r.scene == scene]
+        auto = next(r for r in mine if r.method == "auto")
+        alt = at_time(mine, "oidn@", auto.relative_time)
+        best = min((r.error for r in mine if r.relative_time <= auto.relative_time
+                    and not r.method.startswith("auto")), default=float("nan"))
+        limits = {}
+        for r in mine:
+            if r.method.startswith("auto --time-limit"):
+                share = float(r.method.rsplit(" ", 1)[1])
+                best_in = min((x.error for x in mine if x.method.startswith("oidn@")
+                               and x.relative_time <= share), default=float("nan"))
+                limits[share] = (r.relative_time / share, r.error, best_in)
+        out.append(dict(scene=scene, auto=auto, alternative=alt, best=best, limits=limits))
+    return out
+
+
+def write_report(out_dir: Path, rows: list[Row], command: str) -> Path:
+    """``rival.csv``, ``rival.md`` (the verdict table) and ``rival.png`` into ``out_dir``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with open(out_dir / "rival.csv", "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["scene", "method", "spp", "seconds", "relative_time", "error",
+                         "rel_mse", "chose"])
+        for r in rows:
+            writer.writerow([r.scene, r.method, r.spp, f"{r.seconds:.4f}",
+                             f"{r.relative_time:.4f}", f"{r.error:.5f}", f"{r.rel_mse:.5f}",
+                             r.chose])
+    lines = [f"Command: `{command}`", "",
+             "| scene | auto chose | auto time | auto error | alternative at that time | "
+             "ratio | best in hindsight | limits 0.1 / 0.25 / 0.5: time / limit, error / "
+             "alternative's best within |", "|---|---|---:|---:|---:|---:|---:|---|"]
+    for v in verdicts(rows):
+        a = v["auto"]
+        limits = "; ".join(f"{t:.2f}, {e / b:.2f}" if b == b else f"{t:.2f}, -"
+                           for t, e, b in v["limits"].values())
+        lines.append(f"| {v['scene']} | {a.chose} | {a.relative_time:.2f} | {a.error:.4f} | "
+                     f"{v['alternative']:.4f} | {a.error / v['alternative']:.2f} | "
+                     f"{v['best']:.4f} | {limits} |")
+    (out_dir / "rival.md").write_text("\n".join(lines) + "\n")
+    scenes = list(dict.fromkeys(r.scene for r in rows))
+    fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.0), squeeze=False)
+    for ax, scene in zip(axes[0], scenes):
+        mine = [r for r in rows if r.scene == scene]
+        alt = sorted((r.relative_time, r.error) for r in mine if r.method.startswith("oidn@"))
+        ax.plot(*zip(*alt), "o-", color="0.5", label="full + OIDN (box)")
+        for r in mine:
+            if r.method.startswith("auto"):
+                ax.plot(r.relative_time, r.error, "r*" if r.method == "auto" else "rx")
+            elif not r.method.startswith("oidn@"):
+                ax.plot(r.relative_time, r.error, "b." if r.method != "full" else "ks")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(scene, fontsize=9)
+        ax.set_xlabel("time / full render")
+    axes[0][0].set_ylabel("error (report's metric)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out_dir / "rival.png", dpi=90)
+    plt.close(fig)
+    return out_dir / "rival.md"
+
+
+def run_rival(out_dir, scenes: list[tuple[str, str, dict]], repeats: int = 2,
+              quick: bool = False, command: str = "", echo=print) -> Path:
+    """Measure every (path, name, defines) of ``scenes``; write the report."""
+    rows = []
+    for path, name, defines in scenes:
+        begin = time.perf_counter()
+        rows += measure_scene(path, name, defines, repeats, quick)
+        echo(f"rival: {name} in {time.perf_counter() - begin:.0f} s")
+    return write_report(Path(out_dir), rows, command)

@@ -1,0 +1,53 @@
+"""``bench rival``: the alternative's curve, the verdicts, one small scene end to end."""
+
+from pathlib import Path
+
+import pytest
+
+from mitsuba_mrt.bench.rival import Row, at_time, rel_mse, run_rival, verdicts
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def rows():
+    out = [Row("s", f"oidn@{spp}", spp, 0.0, t, e, 0.0) for spp, t, e in
+           ((1, 0.1, 0.04), (4, 0.4, 0.02), (16, 1.6, 0.01))]
+    out += [Row("s", "full", 64, 1.0, 1.0, 0.03, 0.0),
+            Row("s", "auto", 64, 0.0, 0.2, 0.02, 0.0, "refine+oidn @ 64 spp"),
+            Row("s", "refine+oidn", 64, 0.0, 0.15, 0.018, 0.0),
+            Row("s", "auto --time-limit 0.25", 64, 0.0, 0.26, 0.021, 0.0)]
+    return out
+
+
+def test_the_alternative_is_interpolated_on_its_curve_in_log_log():
+    # halfway (in log time) between 0.1 and 0.4: the geometric mean of the errors
+    assert at_time(rows(), "oidn@", 0.2) == pytest.approx((0.04 * 0.02) ** 0.5)
+    assert at_time(rows(), "oidn@", 0.01) == pytest.approx(0.04)  # beyond the ends: the end
+
+
+def test_verdicts_compare_auto_with_the_alternative_and_hindsight():
+    (v,) = verdicts(rows())
+    assert v["auto"].method == "auto" and v["alternative"] == pytest.approx(0.02828, rel=1e-3)
+    assert v["best"] == 0.018  # refine+oidn, within auto's time; auto itself not counted
+    ratio, error, best_within = v["limits"][0.25]
+    assert ratio == pytest.approx(0.26 / 0.25) and error == 0.021 and best_within == 0.04
+
+
+def test_rel_mse_weighs_dark_pixels_more():
+    import numpy as np
+
+    dark, bright = np.full((1, 1, 3), 0.1), np.full((1, 1, 3), 1.0)
+    assert rel_mse(dark + 0.1, dark) > rel_mse(bright + 0.1, bright)
+
+
+def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant):
+    table = run_rival(tmp_path, [(ROOT / "scenes_xml" / "gallery" / "cornell.xml", "cornell",
+                                  {"res": 32, "spp": 4})], repeats=1, quick=True,
+                      command="test", echo=lambda line: None)
+    text = table.read_text()
+    assert "| cornell |" in text and "Command: `test`" in text
+    assert (tmp_path / "rival.png").stat().st_size > 0
+    lines = (tmp_path / "rival.csv").read_text().splitlines()
+    methods = {line.split(",")[1] for line in lines[1:]}
+    assert {"full", "oidn@1", "oidn@4", "auto", "fast", "refine+oidn",
+            "auto --time-limit 0.1"} <= methods
