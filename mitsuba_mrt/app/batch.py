@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import MRTError, one_line
-from .imageio import atomic_path
+from ..imageio import atomic_path
 
 #: The batch table, in the output folder.
 TABLE_NAME = "batch.csv"

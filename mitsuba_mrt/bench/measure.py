@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..app.imageio import atomic_path
+from ..imageio import atomic_path
 from .experiments import (EQUAL_TIME, FULL, OIDN, OIDN_BASELINE_QUALITY,
                           OIDN_EQUAL_TIME, OIDN_NOAUX, OIDN_NOAUX_EQUAL_TIME, OIDN_QUALITIES,
                           Experiment, Point, Setting, available_methods, denoised_name,

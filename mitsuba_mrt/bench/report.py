@@ -29,7 +29,7 @@ from dataclasses import asdict, fields
 
 import numpy as np
 
-from ..app.imageio import atomic_path, srgb_encode
+from ..imageio import atomic_path, srgb_encode
 from ..types import MRTParams
 from .experiments import (BASELINES, EQUAL_TIME_BASELINES, FULL, OIDN, OIDN_NOAUX,
                           Experiment, denoised_mode)

@@ -24,8 +24,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ..app.imageio import atomic_path
 from ..errors import MRTError
+from ..imageio import atomic_path
 from .experiments import EXPERIMENTS, build_experiment, resolve_methods
 from .measure import (CONVERGED_FACTOR, DENOISE_COLUMNS, MIN_TIMED_SECONDS, DenoiseRunner,
                       MemoryMeter, PointRunner)
