@@ -9,7 +9,7 @@ atomically. ``denoise`` points are measured by :class:`.measure.DenoiseRunner`
 into their own CSV columns, plotted as error against time.
 
 Given ``map_points`` (the ``bench`` command's ``--scheduler``/``--workers``:
-:func:`mitsuba_mrt.app.batch.cluster_map`), the points are measured
+:func:`mitsuba_mrt.app.cluster.cluster_map`), the points are measured
 elsewhere, one call of :func:`measure_point` each, all methods of a point in
 one process as in the serial run; the rows and pictures are written here, in
 the points' order, as the serial run writes them.

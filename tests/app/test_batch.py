@@ -19,8 +19,10 @@ import pytest
 
 from conftest import ROOT, SCENES
 from mitsuba_mrt import MRTError
-from mitsuba_mrt.app.batch import (BatchTask, Sweep, completed_row, parse_values, plan_tasks,
-                                   read_table, run_batch)
+from mitsuba_mrt.app.batch import run_batch
+from mitsuba_mrt.app.outputs import read_table
+from mitsuba_mrt.app.sweep import Sweep, parse_values
+from mitsuba_mrt.app.tasks import BatchTask, completed_row, plan_tasks
 
 pytest.importorskip("distributed")
 
