@@ -3,10 +3,11 @@
 :func:`run_experiment` builds the experiment (:mod:`.experiments`),
 measures its points one after the other (:mod:`.measure`), rewriting the
 CSV after every point so that a crash keeps what was measured, and then
-writes the plot, the triptych (or, for ``gallery``, a picture per scene)
-and the markdown tables (:mod:`.report`) into the output folder, each file
-atomically. ``denoise`` points are measured by :class:`.measure.DenoiseRunner`
-into their own CSV columns, plotted as error against time.
+writes the plot, the triptych (or, for ``gallery``, a picture per scene;
+:mod:`.plots`) and the markdown tables (:mod:`.analysis`) into the output
+folder, each file atomically. ``denoise`` points are measured by
+:class:`.measure_denoise.DenoiseRunner` into their own CSV columns, plotted
+as error against time.
 
 Given ``map_points`` (the ``bench`` command's ``--scheduler``/``--workers``:
 :func:`mitsuba_mrt.app.cluster.cluster_map`), the points are measured
@@ -27,10 +28,12 @@ from pathlib import Path
 from ..errors import MRTError
 from ..imageio import atomic_path
 from .experiments import EXPERIMENTS, build_experiment, resolve_methods
-from .measure import (CONVERGED_FACTOR, DENOISE_COLUMNS, MIN_TIMED_SECONDS, DenoiseRunner,
-                      MemoryMeter, PointRunner)
-from .report import (CSV_COLUMNS, environment_line, markdown_tables, plot_denoise, plot_sweep,
-                     plot_tradeoff, plot_triptych, read_csv, write_csv)
+from .analysis import CSV_COLUMNS, environment_line, markdown_tables, read_csv, write_csv
+from .measure import MIN_TIMED_SECONDS, PointRunner
+from .measure_denoise import DenoiseRunner
+from .memory import MemoryMeter
+from .plots import plot_denoise, plot_sweep, plot_tradeoff, plot_triptych
+from .records import CONVERGED_FACTOR, DENOISE_COLUMNS
 
 #: The subfolder of the output folder that keeps converged references.
 CACHE_DIR = "cache"
