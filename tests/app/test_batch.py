@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import ROOT, SCENES
+from helpers import ROOT, SCENES
 from mitsuba_mrt import MRTError
 from mitsuba_mrt.app.batch import run_batch
 from mitsuba_mrt.app.outputs import read_table

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, SCENES
+from helpers import ROOT, SCENES
 
 
 def run_cli(*args, cwd=ROOT):

@@ -13,7 +13,7 @@ from mitsuba_mrt.errors import MRTError
 from mitsuba_mrt.modes import MODES
 from mitsuba_mrt.modes.paper import paper_reconstruct
 
-from conftest import SCENES
+from helpers import SCENES
 
 #: The OIDN baselines' rows, where pyoidn is installed (run.py installs it).
 OIDN_ROWS = ({"oidn-equal-time", "oidn-noaux-equal-time"}

@@ -7,7 +7,7 @@ import pytest
 from mitsuba_mrt.app.cli import main
 from mitsuba_mrt.bench import analysis, experiments, measure_denoise, memory, records
 
-from conftest import SCENES
+from helpers import SCENES
 
 
 def test_the_experiment_covers_fig1_and_the_gallery():
