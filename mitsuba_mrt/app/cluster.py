@@ -131,7 +131,7 @@ def set_jit_threads(jit_threads) -> None:
         except (MRTError, ValueError):  # not on a Dask worker
             jit_threads = None
     if jit_threads:
-        import drjit as dr  # on first use, as the rest of app/ imports Dr.Jit and Mitsuba
+        import drjit as dr  # heavy: imported on first use, as job.py imports Mitsuba
 
         if dr.thread_count() != jit_threads:
             dr.set_thread_count(int(jit_threads))
