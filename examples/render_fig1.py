@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mitsuba_mrt  # noqa: E402
-from mitsuba_mrt.app.imageio import atomic_path, srgb_encode  # noqa: E402
+from mitsuba_mrt.imageio import atomic_path, srgb_encode  # noqa: E402
 from mitsuba_mrt.recon.metrics import error_map, paper_error, psnr  # noqa: E402
 
 

@@ -1,13 +1,11 @@
-"""Shared fixtures: one Mitsuba variant for the session, small scenes."""
+"""Shared fixtures: the session's Mitsuba variant, the ground truth of the ids.
+
+Plain helpers (paths, the small scene) are in helpers.py, a module.
+"""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
-SCENES = ROOT / "scenes_xml"
 
 
 @pytest.fixture(scope="session")
@@ -18,40 +16,14 @@ def variant():
     return mi.variant()
 
 
-def small_scene_xml(res: int = 32, integrator: str = '<integrator type="matte"/>',
-                    extra: str = "", lights: bool = True, shapes: bool = True) -> str:
-    """A red sphere on a grey plane, two point lights, a box-filtered film."""
-    body = ""
-    if shapes:
-        body += """
-  <shape type="sphere" id="ball">
-    <point name="center" x="0" y="0" z="0"/><float name="radius" value="1"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf>
-  </shape>
-  <shape type="rectangle" id="floor">
-    <transform name="to_world"><scale value="20"/><translate z="-1.5"/></transform>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>
-  </shape>"""
-    if lights:
-        body += """
-  <emitter type="point"><point name="position" x="2" y="2" z="5"/><rgb name="intensity" value="60"/></emitter>
-  <emitter type="point"><point name="position" x="-3" y="0" z="4"/><rgb name="intensity" value="40"/></emitter>"""
-    return f"""<scene version="3.0.0">
-  {integrator}
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, 0, 8" target="0, 0, 0" up="0, 1, 0"/></transform>
-    <sampler type="stratified"><integer name="sample_count" value="1"/><boolean name="jitter" value="false"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/>
-      <rfilter type="box"/></film>
-  </sensor>{body}
-  {extra}
-</scene>"""
-
-
-def true_ids(scene, rule: str = "exact"):
-    """Every pixel's id, traced (sample fraction 1): the ground truth of the id stages."""
+@pytest.fixture(scope="session")
+def true_ids(variant):
+    """``true_ids(scene, rule="exact")``: every pixel's id, traced (sample fraction 1),
+    the ground truth of the id stages."""
     import mitsuba_mrt
 
-    full = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0)
-    return full.trace.ids(rule).reshape(full.ids.shape)
+    def ids(scene, rule: str = "exact"):
+        full = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0)
+        return full.trace.ids(rule).reshape(full.ids.shape)
+
+    return ids

@@ -222,7 +222,7 @@ def _bench(args) -> int:
     with contextlib.ExitStack() as stack:
         map_points = None
         if args.scheduler or args.workers is not None:
-            from .batch import cluster_map
+            from .cluster import cluster_map
 
             map_points = stack.enter_context(cluster_map(
                 args.scheduler, args.workers, lambda line: print(line, file=sys.stderr)))

@@ -13,8 +13,8 @@ import numpy as np
 
 from ..recon.metrics import error_map, paper_error, psnr
 from ..types import MRTParams, Skips, Timings, TracedCounts
-from .imageio import (OutputSet, check_output_folder, write_error_png, write_exr, write_json,
-                      write_png)
+from ..imageio import (OutputSet, check_output_folder, write_error_png, write_exr, write_json,
+                       write_png)
 
 
 @dataclass

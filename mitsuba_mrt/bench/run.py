@@ -3,13 +3,14 @@
 :func:`run_experiment` builds the experiment (:mod:`.experiments`),
 measures its points one after the other (:mod:`.measure`), rewriting the
 CSV after every point so that a crash keeps what was measured, and then
-writes the plot, the triptych (or, for ``gallery``, a picture per scene)
-and the markdown tables (:mod:`.report`) into the output folder, each file
-atomically. ``denoise`` points are measured by :class:`.measure.DenoiseRunner`
-into their own CSV columns, plotted as error against time.
+writes the plot, the triptych (or, for ``gallery``, a picture per scene;
+:mod:`.plots`) and the markdown tables (:mod:`.analysis`) into the output
+folder, each file atomically. ``denoise`` points are measured by
+:class:`.measure_denoise.DenoiseRunner` into their own CSV columns, plotted
+as error against time.
 
 Given ``map_points`` (the ``bench`` command's ``--scheduler``/``--workers``:
-:func:`mitsuba_mrt.app.batch.cluster_map`), the points are measured
+:func:`mitsuba_mrt.app.cluster.cluster_map`), the points are measured
 elsewhere, one call of :func:`measure_point` each, all methods of a point in
 one process as in the serial run; the rows and pictures are written here, in
 the points' order, as the serial run writes them.
@@ -24,13 +25,15 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ..app.imageio import atomic_path
 from ..errors import MRTError
+from ..imageio import atomic_path
 from .experiments import EXPERIMENTS, build_experiment, resolve_methods
-from .measure import (CONVERGED_FACTOR, DENOISE_COLUMNS, MIN_TIMED_SECONDS, DenoiseRunner,
-                      MemoryMeter, PointRunner)
-from .report import (CSV_COLUMNS, environment_line, markdown_tables, plot_denoise, plot_sweep,
-                     plot_tradeoff, plot_triptych, read_csv, write_csv)
+from .analysis import CSV_COLUMNS, environment_line, markdown_tables, read_csv, write_csv
+from .measure import MIN_TIMED_SECONDS, PointRunner
+from .measure_denoise import DenoiseRunner
+from .memory import MemoryMeter
+from .plots import plot_denoise, plot_sweep, plot_tradeoff, plot_triptych
+from .records import CONVERGED_FACTOR, DENOISE_COLUMNS
 
 #: The subfolder of the output folder that keeps converged references.
 CACHE_DIR = "cache"

@@ -11,16 +11,18 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
-from conftest import ROOT, SCENES
+from helpers import ROOT, SCENES
 from mitsuba_mrt import MRTError
-from mitsuba_mrt.app.batch import (BatchTask, Sweep, completed_row, parse_values, plan_tasks,
-                                   read_table, run_batch)
+from mitsuba_mrt.app.batch import run_batch
+from mitsuba_mrt.app.outputs import read_table
+from mitsuba_mrt.app.sweep import Sweep, parse_values
+from mitsuba_mrt.app.tasks import BatchTask, completed_row, plan_tasks
 
 pytest.importorskip("distributed")
 
@@ -260,34 +262,66 @@ def test_scheduler_option_and_animation(remote_cluster, tmp_path):
     assert abs(frames[0][..., :3].astype(int) - first[..., :3]).max() <= 8  # GIF palette
 
 
+def _die_once(task_name: str, marker: str) -> None:
+    """Run on every worker: task ``task_name`` kills its worker process the first time
+    it runs, after leaving a temporary output file as a worker killed while writing
+    would; ``marker`` (created once, with that process's id) says it has happened."""
+    from mitsuba_mrt.app import tasks
+
+    real = getattr(tasks.run_render_job, "real", tasks.run_render_job)
+
+    def run_render_job(job):
+        if Path(job.out_dir).name == task_name:
+            try:
+                fd = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:  # it died once already: render
+                pass
+            else:
+                os.write(fd, str(os.getpid()).encode())
+                os.close(fd)
+                folder = Path(job.out_dir)
+                folder.mkdir(parents=True, exist_ok=True)
+                (folder / f".{Path(job.scene).stem}_mrt.half.exr").write_bytes(b"half")
+                os._exit(1)  # the worker process dies in the middle of the task
+        return real(job)
+
+    run_render_job.real = real
+    tasks.run_render_job = run_render_job
+
+
+def _live_again() -> None:
+    """Undo :func:`_die_once` on a worker (one restarted since has nothing to undo)."""
+    from mitsuba_mrt.app import tasks
+
+    tasks.run_render_job = getattr(tasks.run_render_job, "real", tasks.run_render_job)
+
+
 def test_killed_worker_loses_no_frame(remote_cluster, tmp_path):
+    """A worker dies in the middle of a task, deterministically (no race against a
+    deadline): that task runs again in another process and every frame is there."""
     address, client = remote_cluster
     out = tmp_path / "out"
-    count = 16  # enough frames that the kill lands before the last one is written
-    killed = {}
-
-    def kill_a_busy_worker():
-        deadline = time.monotonic() + 60
-        while not list(out.glob("*/*.json")) and time.monotonic() < deadline:
-            time.sleep(0.01)
-        busy = [w for w, keys in client.processing().items() if keys]
-        killed["busy"] = bool(busy)
-        victim = (busy or list(client.scheduler_info()["workers"]))[0]
-        pid = client.run(os.getpid, workers=[victim])[victim]
-        killed["done_before"] = len(list(out.glob("*/*.json")))
-        os.kill(pid, signal.SIGKILL)
-        killed["pid"] = pid
-
-    killer = threading.Thread(target=kill_a_busy_worker)
-    killer.start()
-    result = run_batch([ORBIT], out, [("res", "24"), ("azimuth", f"0:{10 * count}:10")],
-                       scheduler=address, mode="fast", reference=False, progress=False,
-                       echo=lambda line: None)
-    killer.join()
-    # the kill came in the middle of the batch, to a worker with a task
-    assert killed["done_before"] < count and killed["busy"]
-    assert [r["status"] for r in result.rows] == ["ok"] * count
+    marker = tmp_path / "died"
+    victim = "paper_fig1_orbit_azimuth=10"
+    # the test module is not importable on the workers: send the hook by value
+    cloudpickle = pytest.importorskip("cloudpickle")
+    module = sys.modules[__name__]
+    cloudpickle.register_pickle_by_value(module)
+    try:
+        client.run(_die_once, victim, str(marker))
+        result = run_batch([ORBIT], out, [("res", "16"), ("azimuth", "0:40:10")],
+                           scheduler=address, mode="fast", reference=False, progress=False,
+                           echo=lambda line: None)
+        client.wait_for_workers(2, timeout=60)  # the nanny brought the worker back
+        client.run(_live_again)
+    finally:
+        cloudpickle.unregister_pickle_by_value(module)
+    dead_pid = marker.read_text()  # the task did kill its worker
+    assert [r["task"] for r in result.rows] == [f"paper_fig1_orbit_azimuth={a}"
+                                                for a in (0, 10, 20, 30)]
+    assert [r["status"] for r in result.rows] == ["ok"] * 4
+    again = next(r for r in result.rows if r["task"] == victim)
+    assert again["worker"].rsplit(":", 1)[1] != dead_pid  # it ran again, elsewhere
     for row in result.rows:
         assert (out / row["task"] / "paper_fig1_orbit_mrt.exr").exists()
-        assert not list((out / row["task"]).glob(".*"))  # no temporary files left
-    client.wait_for_workers(2, timeout=60)  # the nanny brought the worker back
+        assert not list((out / row["task"]).glob(".*"))  # the leftover was removed

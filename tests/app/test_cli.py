@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, SCENES
+from helpers import ROOT, SCENES
 
 
 def run_cli(*args, cwd=ROOT):
@@ -36,7 +36,7 @@ def test_render_writes_every_output(tmp_path):
         assert key in summary
     assert 0.0 <= summary["error"] < 0.05
 
-    from mitsuba_mrt.app.imageio import read_exr
+    from mitsuba_mrt.imageio import read_exr
 
     channels = read_exr(tmp_path / "paper_fraction_mrt.exr")
     assert {"R", "G", "B", "id", "shape_index", "visible_lights", "traced"} <= set(channels)
@@ -116,7 +116,7 @@ def test_inf_radiance_leaves_no_output(tmp_path):
 
 def test_failed_write_leaves_no_partial_file(tmp_path):
     from mitsuba_mrt import MRTError
-    from mitsuba_mrt.app.imageio import write_exr
+    from mitsuba_mrt.imageio import write_exr
 
     target = tmp_path / "x.exr"
     with pytest.raises(MRTError):
@@ -137,7 +137,8 @@ def test_a_full_disk_is_one_line_exit_2_and_leaves_no_file(tmp_path, monkeypatch
     import errno
     import os
 
-    from mitsuba_mrt.app import cli, imageio
+    from mitsuba_mrt import imageio
+    from mitsuba_mrt.app import cli
 
     real = os.replace
 

@@ -5,9 +5,9 @@ import math
 import pytest
 
 from mitsuba_mrt.app.cli import main
-from mitsuba_mrt.bench import experiments, measure, report
+from mitsuba_mrt.bench import analysis, experiments, measure_denoise, memory, records
 
-from conftest import SCENES
+from helpers import SCENES
 
 
 def test_the_experiment_covers_fig1_and_the_gallery():
@@ -46,12 +46,12 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
     argv = ["bench", "denoise", "--quick", "--res", "24", "-o", str(tmp_path),
             "--scenes", str(SCENES), "--no-progress"]
     assert main(argv) == 0
-    rows = report.read_csv(tmp_path / "denoise.csv")
-    assert tuple(rows[0]) == measure.DENOISE_COLUMNS == (
+    rows = analysis.read_csv(tmp_path / "denoise.csv")
+    assert tuple(rows[0]) == records.DENOISE_COLUMNS == (
         "scene", "method", "setting", "spp", "total_s", "relative_time", "error_converged",
         "psnr_converged")
     fig1 = [r for r in rows if r["scene"] == "paper_fig1.xml"]
-    noise_free = [r for r in fig1 if r["setting"] == measure.NOISE_FREE]
+    noise_free = [r for r in fig1 if r["setting"] == records.NOISE_FREE]
     fig1 = [r for r in fig1 if r not in noise_free]
     assert {r["method"] for r in fig1} == {"full", "oidn", "oidn-noaux", "mrt-fast",
                                            "mrt-fast+oidn", "mrt-fast+oidn-balanced"}
@@ -60,7 +60,7 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
     assert sorted(int(r["spp"]) for r in balanced) == [1, 4]
     assert {r["setting"] for r in fig1 if r["method"] == "mrt-fast+oidn"} == {
         "f=0.1, denoise=oidn", "f=0.05, denoise=oidn", "f=0.2, denoise=oidn"}
-    curves = report.denoise_curves(rows)["paper_fig1"]
+    curves = analysis.denoise_curves(rows)["paper_fig1"]
     assert {"mrt-fast", "mrt-fast f=0.05", "mrt-fast+oidn f=0.2",
             "mrt-fast+oidn-balanced"} <= set(curves)
     assert all(len(curves[label]) == 2 for label in curves if label.startswith("mrt-"))
@@ -88,14 +88,14 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
     # the gallery's scene: fast+oidn at f=0.2 once more beyond the ladder's top, on
     # the same curve, timed against the same full render
     gallery = [r for r in rows if r["scene"] == "gallery/checker_border.xml"
-               and r["setting"] != measure.NOISE_FREE]
+               and r["setting"] != records.NOISE_FREE]
     assert sorted(int(r["spp"]) for r in gallery if r["method"] == "full") == [1, 4]
     beyond = [r for r in gallery if int(r["spp"]) == 8]
     assert [(r["method"], r["setting"]) for r in beyond] == [
         ("mrt-fast+oidn", "f=0.2, denoise=oidn")]
     for column in ("total_s", "relative_time", "error_converged"):
         assert math.isfinite(float(beyond[0][column]))
-    curve = report.denoise_curves(rows)["checker_border"]["mrt-fast+oidn f=0.2"]
+    curve = analysis.denoise_curves(rows)["checker_border"]["mrt-fast+oidn f=0.2"]
     assert [int(p[2]["spp"]) for p in curve] == [1, 4, 8]
 
 
@@ -114,10 +114,11 @@ def test_the_progress_bar_ends_at_its_total(scene, defines, beyond):
                               [base[0], base[-1]], group="x")
     methods = ["full", "mrt-fast"]
     ticks = []
-    runner = measure.DenoiseRunner(exp, point, methods, 1, SCENES, measure.MemoryMeter(),
-                                   {}, lambda: ticks.append(1), min_seconds=0.0)
+    runner = measure_denoise.DenoiseRunner(exp, point, methods, 1, SCENES,
+                                           memory.MemoryMeter(), {},
+                                           lambda: ticks.append(1), min_seconds=0.0)
     rows, _ = runner.run()
-    assert len(ticks) == measure.DenoiseRunner.ticks(exp, point, methods, 1)
+    assert len(ticks) == measure_denoise.DenoiseRunner.ticks(exp, point, methods, 1)
     assert [r.spp for r in rows if r.method == "mrt-fast+oidn"] == [beyond]
 
 
@@ -134,10 +135,10 @@ def _rows(curves):
 
 def test_equal_error_is_interpolated_log_log():
     points = [(0.01, 0.04, None), (0.04, 0.01, None)]
-    t, how = report.time_to_reach(points, 0.02)
+    t, how = analysis.time_to_reach(points, 0.02)
     assert how == "" and t == pytest.approx(0.02)  # halfway in log error, log time
-    assert report.time_to_reach(points, 0.05) == (0.01, "<=")
-    t, how = report.time_to_reach(points, 0.001)
+    assert analysis.time_to_reach(points, 0.05) == (0.01, "<=")
+    t, how = analysis.time_to_reach(points, 0.001)
     assert math.isnan(t) and how == "not reached"
 
 
@@ -147,19 +148,19 @@ def test_equal_time_compares_within_each_budget():
         ("mrt-fast", "f=0.1"): [(4, 0.02, 0.05), (64, 0.12, 0.015)],
         ("oidn", "quality=fast"): [(1, 0.15, 0.03), (4, 0.3, 0.01)],
     })
-    curves = report.denoise_curves(rows)["x"]
-    verdict = report.equal_time_verdict(curves)
+    curves = analysis.denoise_curves(rows)["x"]
+    verdict = analysis.equal_time_verdict(curves)
     # at 0.15 OIDN has 0.03, the MRT 0.05; from 0.12 on, 0.015 against 0.03
     assert verdict["holds"] and verdict["least_gain"] == pytest.approx(2.0)
     slow = _rows({("full", "s"): [(64, 1.0, 0.02)], ("mrt-fast", "f"): [(4, 0.2, 0.05)],
                   ("oidn", "quality=fast"): [(1, 0.1, 0.03)]})
-    verdict = report.equal_time_verdict(report.denoise_curves(slow)["x"])
+    verdict = analysis.equal_time_verdict(analysis.denoise_curves(slow)["x"])
     assert not verdict["holds"] and math.isinf(verdict["worst"]) and verdict["at"] == 0.1
-    summary = report.denoise_summary(rows)[0]
+    summary = analysis.denoise_summary(rows)[0]
     assert summary["mrt"][0] == "mrt-fast" and summary["b_target"] == 0.10
     label, t, how = summary["oidn"]  # 0.03 at 0.15, 0.01 at 0.3: 0.02 in between
     assert label == "oidn fast" and 0.15 < t < 0.3 and how == ""
-    lines = report.denoise_tables(rows)
+    lines = analysis.denoise_tables(rows)
     assert any(line.startswith("| x | mrt-fast | 64 | 0.12 | 0.015 | oidn fast, 1 spp")
                for line in lines)
 

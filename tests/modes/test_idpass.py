@@ -3,7 +3,7 @@ import numpy as np
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import paper_error
-from conftest import small_scene_xml, true_ids
+from helpers import small_scene_xml
 
 CHECKER_PLANE = """<shape type="rectangle">
     <transform name="to_world"><scale value="4"/></transform>
@@ -26,7 +26,7 @@ def test_checkerboard_is_reproduced_by_the_albedo_of_the_id_pass(variant):
     assert paper_error(result.image, reference) < 0.05 * paper_error(fast.image, reference)
 
 
-def test_id_pass_ids_are_exact_and_slivers_are_traced(variant):
+def test_id_pass_ids_are_exact_and_slivers_are_traced(variant, true_ids):
     scene = mi.load_string(small_scene_xml(64))
     result = mitsuba_mrt.render(scene, mode="idpass")
     assert np.array_equal(result.ids, true_ids(scene))

@@ -6,7 +6,7 @@ import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
 from mitsuba_mrt.recon.metrics import paper_error
 from mitsuba_mrt.modes.refine import refine_edges
-from conftest import small_scene_xml, true_ids
+from helpers import small_scene_xml
 
 
 def disc_ids(h, w, cx, cy, radius):
@@ -60,7 +60,7 @@ def test_flagged_samples_are_traced_down_to_pixels():
     assert refine_edges(p, truth[np.ix_(p.rows, p.cols)], lambda pts: 1 / 0)[1] == []
 
 
-def test_refine_mode_on_a_sphere_matches_the_full_trace(variant):
+def test_refine_mode_on_a_sphere_matches_the_full_trace(variant, true_ids):
     scene = mi.load_string(small_scene_xml(64))
     refined = mitsuba_mrt.render(scene, mode="refine")
     assert (refined.ids != true_ids(scene)).mean() < 0.002  # at most features thinner than a sub-cell

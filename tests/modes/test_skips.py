@@ -5,7 +5,7 @@ import numpy as np
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import paper_error
-from conftest import small_scene_xml
+from helpers import small_scene_xml
 
 SPHERE_ONLY = """<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.6, 0.9"/></bsdf></shape>
   <emitter type="point"><point name="position" x="3" y="2" z="4"/><rgb name="intensity" value="50"/></emitter>"""

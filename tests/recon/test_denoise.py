@@ -78,7 +78,7 @@ def test_missing_extra_is_a_one_line_error(monkeypatch):
 
 def test_render_with_denoise_times_the_stage(oidn, variant):
     import mitsuba as mi
-    from conftest import small_scene_xml
+    from helpers import small_scene_xml
 
     import mitsuba_mrt
 
@@ -155,7 +155,7 @@ def test_pixels_whose_samples_agreed_keep_their_values(oidn):
 
 def test_denoise_quality_is_a_parameter_of_python_and_xml(oidn, variant):
     import mitsuba as mi
-    from conftest import small_scene_xml
+    from helpers import small_scene_xml
 
     import mitsuba_mrt
     from mitsuba_mrt.types import MRTParams

@@ -5,7 +5,7 @@ import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import paper_error
-from conftest import SCENES
+from helpers import SCENES
 
 
 def test_paper_fraction_scene_is_in_the_reports_error_range(variant):

@@ -3,7 +3,7 @@ import numpy as np
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import edge_mask, error_map
-from conftest import small_scene_xml
+from helpers import small_scene_xml
 
 # A mirror facing the camera, two spheres behind the camera: they are seen
 # only in the mirror.

@@ -8,7 +8,7 @@ import pytest
 import mitsuba_mrt
 from mitsuba_mrt import MRTError, grid_pattern
 from mitsuba_mrt.recon.metrics import paper_error
-from conftest import small_scene_xml
+from helpers import small_scene_xml
 
 LIGHTS = [((2.0, 2.0, 5.0), 60.0), ((-3.0, 0.0, 4.0), 40.0)]
 

@@ -12,7 +12,7 @@ import pytest
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import paper_error
 
-from conftest import ROOT, small_scene_xml
+from helpers import ROOT, small_scene_xml
 
 
 def path_scene(res=24, rfilter="", rgba=False, spp=16, extra=""):

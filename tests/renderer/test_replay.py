@@ -8,7 +8,7 @@ import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
 from mitsuba_mrt.renderer.replay import padded_size, recordings
 from mitsuba_mrt.renderer.trace import is_jit, trace_pixels
-from conftest import small_scene_xml
+from helpers import small_scene_xml
 
 pytestmark = pytest.mark.skipif(not is_jit(), reason="only JIT variants replay kernels")
 

@@ -5,7 +5,7 @@ import warnings
 import mitsuba as mi
 import pytest
 
-from conftest import small_scene_xml
+from helpers import small_scene_xml
 from mitsuba_mrt import MRTError, MRTWarning
 from mitsuba_mrt.renderer import scene as scene_module
 from mitsuba_mrt.renderer.scene import BYTES_PER_PIXEL, check_film, warn_negative_emitters

@@ -5,6 +5,13 @@ Every property is its own test, parametrised by mode, so that failures are
 itemised.  Profiles (``fast`` by default, ``thorough`` with
 ``MITSUBA_MRT_STRESS=thorough``) are set in conftest.py.  A failing example
 prints a standalone reproduction (hypothesis' notes).
+
+The bodies of the ``@property_test`` tests hold no ``assert``: each returns
+``(problems, measure)``, a list of what is wrong (empty: the property holds)
+and how bad the worst is; the decorator runs it per mode and example through
+:func:`.stress_support.check`, which fails the example when the list is not
+empty (``thorough``: counts it, and :func:`.stress_support.finish` fails the
+test at the end).  The ``test_known_*`` regressions below assert as usual.
 """
 
 from __future__ import annotations
@@ -30,7 +37,8 @@ PAPER_ALGORITHM_2 = ("mode paper keeps the report's Algorithm 2: its smoothing d
 def property_test(prop, strategy, exceptions=None):
     """A test of ``prop`` per mode; ``body(case, mode, data) -> (problems, measure)``.
 
-    ``exceptions``: ``{mode: reason}`` for modes that document why the
+    ``body`` asserts nothing: the test fails where its ``problems`` are not
+    empty (:func:`.stress_support.check`).  ``exceptions``: ``{mode: reason}`` for modes that document why the
     property does not hold for them (they are skipped, with the reason).
     """
     exceptions = exceptions or {}
@@ -57,6 +65,8 @@ def _regions(out):
 
 
 # --------------------------------------------------------------------------- properties
+# No assert in these bodies: the returned problems are the verdict (property_test
+# fails the example when the list is not empty).
 
 @property_test("finite", cases(values=VALUES + ("huge",), exponents=(-30, 37)))
 def test_finite_output(case, mode, data):

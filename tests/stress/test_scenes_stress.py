@@ -26,7 +26,7 @@ PATH = '<integrator type="path"><integer name="max_depth" value="3"/></integrato
 def scene_xml(s: float = 1.0, origin=(0, 0, 8), target=(0, 0, 0), up=(0, 1, 0),
               sphere_bsdf: str = '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf>',
               integrator: str = MATTE, spp: int = 1, extra: str = "", fov: float = 40) -> str:
-    """The sphere-on-a-plane scene of tests/conftest.py, every length times ``s``
+    """The sphere-on-a-plane scene of tests/helpers.py, every length times ``s``
     (light intensities times s^2, so that the image does not change)."""
     ox, oy, oz = (v * s for v in origin)
     tx, ty, tz = (v * s for v in target)

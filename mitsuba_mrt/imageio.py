@@ -3,6 +3,10 @@
 Every writer writes to a temporary file in the target folder and renames it
 into place, so a failure never leaves a half-written output; an
 :class:`OutputSet` does the same for several files together.
+
+It imports nothing else of the package but :mod:`.errors`, so that both
+:mod:`.app` and :mod:`.bench` may import it and :mod:`.bench` imports
+nothing of :mod:`.app`.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import MRTError
+from .errors import MRTError
 
 
 @contextmanager

@@ -1,4 +1,4 @@
-"""Outputs appear together or not at all (app/imageio.py)."""
+"""Outputs appear together or not at all (mitsuba_mrt/imageio.py)."""
 
 import errno
 import os
@@ -6,8 +6,8 @@ import os
 import pytest
 
 from mitsuba_mrt import MRTError
-from mitsuba_mrt.app import imageio
-from mitsuba_mrt.app.imageio import OutputSet, check_output_folder
+from mitsuba_mrt import imageio
+from mitsuba_mrt.imageio import OutputSet, check_output_folder
 
 
 def write_set(folder, names, fail_after=None):

@@ -1,24 +1,16 @@
-"""Reporting a bench experiment: its CSV, plots, pictures and markdown tables.
+"""The numbers of a bench experiment: its CSV, the verdicts and the markdown tables.
 
-The CSV has one row per method and setting (:class:`.measure.MethodRow`,
+The CSV has one row per method and setting (:class:`.records.MethodRow`,
 whose fields are :data:`CSV_COLUMNS`). Everything else here reads rows back
-as the CSV holds them, dicts of strings (:func:`read_csv`), so a plot or a
-table can be redrawn from a CSV alone:
-
-- ``<experiment>.png``: error and relative time against the swept parameter
-  (:func:`plot_sweep`); for ``tradeoff``, time against error
-  (:func:`plot_tradeoff`);
-- ``<experiment>_triptych.png``: reference | MRT | error map of one setting
-  (:func:`plot_triptych`); for ``gallery``, ``gallery_<scene>.png``:
-  reference | ``auto`` | ``bicubic`` | error map of ``auto``, per scene;
-- ``<experiment>.md``: the tables (:func:`markdown_tables`); for
-  ``gallery`` one table, a row per scene and method.
+as the CSV holds them, dicts of strings (:func:`read_csv`), so a table (or
+a plot, :mod:`.plots`) can be redrawn from a CSV alone:
+``<experiment>.md`` holds the tables (:func:`markdown_tables`); for
+``gallery`` one table, a row per scene and method.
 
 The ``denoise`` experiment has its own CSV columns
-(:data:`.measure.DENOISE_COLUMNS`), plot (:func:`plot_denoise`: error
-against time, a panel per scene, a curve per method) and tables
-(:func:`denoise_tables`: equal time, equal error, and the verdicts on the
-targets of issue 15).
+(:data:`.records.DENOISE_COLUMNS`), curves (:func:`denoise_curves`: error
+against time, per scene and method) and tables (:func:`denoise_tables`:
+equal time, equal error, and the verdicts on the targets of issue 15).
 """
 
 from __future__ import annotations
@@ -29,11 +21,11 @@ from dataclasses import asdict, fields
 
 import numpy as np
 
-from ..app.imageio import atomic_path, srgb_encode
+from ..imageio import atomic_path
 from ..types import MRTParams
 from .experiments import (BASELINES, EQUAL_TIME_BASELINES, FULL, OIDN, OIDN_NOAUX,
                           Experiment, denoised_mode)
-from .measure import CONVERGED_FACTOR, NOISE_FREE, MethodRow
+from .records import CONVERGED_FACTOR, NOISE_FREE, MethodRow
 
 #: Columns of every CSV, in order: the fields of :class:`MethodRow`.
 CSV_COLUMNS = tuple(f.name for f in fields(MethodRow))
@@ -69,42 +61,44 @@ def read_csv(path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
-def _num(value) -> float:
+def num(value) -> float:
+    """A CSV cell as a float; NaN where it holds no number."""
     try:
         return float(value)
     except (TypeError, ValueError):
         return math.nan
 
 
-def _ok(rows):
+def ok_rows(rows):
+    """The rows whose status is ``ok``."""
     return [r for r in rows if r.get("status", "ok") == "ok"]
 
 
-def _error_of(r) -> float:
+def error_of(r) -> float:
     """The error a plot shows: against the converged reference when there is one."""
-    conv = _num(r.get("error_converged"))
-    return conv if math.isfinite(conv) else _num(r.get("error"))
+    conv = num(r.get("error_converged"))
+    return conv if math.isfinite(conv) else num(r.get("error"))
 
 
 def _psnr_of(r) -> float:
     """PSNR against the converged reference when there is one, else the full render."""
-    if math.isfinite(_num(r.get("error_converged"))):
-        return _num(r.get("psnr_converged_db"))
-    return _num(r.get("psnr_db"))
+    if math.isfinite(num(r.get("error_converged"))):
+        return num(r.get("psnr_converged_db"))
+    return num(r.get("psnr_db"))
 
 
-def _series(rows, experiment_name):
+def sweep_series(rows, experiment_name):
     """Lines of a sweep plot: {(method, group): sorted [(x, row)]}; baselines once."""
     lines = {}
     groups = sorted({r["group"] for r in rows if r["method"] != FULL}, key=_group_key)
     for r in rows:
         m = r["method"]
-        if m in (FULL, *EQUAL_TIME_BASELINES) or not math.isfinite(_num(r["x"])):
+        if m in (FULL, *EQUAL_TIME_BASELINES) or not math.isfinite(num(r["x"])):
             continue
         if m in BASELINES and groups and r["group"] != groups[0]:
             continue
         key = (m, "" if m in BASELINES else r["group"])
-        lines.setdefault(key, []).append((_num(r["x"]), r))
+        lines.setdefault(key, []).append((num(r["x"]), r))
     return {k: sorted(v, key=lambda p: p[0]) for k, v in lines.items()}
 
 
@@ -115,169 +109,8 @@ def _group_key(g: str):
         return (1, g)
 
 
-def _figure(width, height):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width, height))
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _plain_ticks(axis):
-    """Tick labels of a log axis as plain numbers (0.02, not 2 x 10^-2)."""
-    from matplotlib.ticker import FuncFormatter
-
-    fmt = FuncFormatter(lambda v, _pos: f"{v:g}")
-    axis.set_major_formatter(fmt)
-    axis.set_minor_formatter(FuncFormatter(
-        lambda v, _pos: f"{v:g}" if f"{v:.0e}"[0] in "25" else ""))
-
-
-def _save(fig, path, dpi=80, palette=False):
-    """Save ``fig`` as PNG; ``palette``: 256 dithered colours (noisy renders stay small)."""
-    with atomic_path(path) as tmp:
-        if palette:
-            try:
-                from PIL import Image  # matplotlib's own dependency
-            except ImportError:  # pragma: no cover
-                palette = False
-        if not palette:
-            fig.savefig(tmp, format="png", dpi=dpi)
-            return
-        fig.set_dpi(dpi)
-        fig.canvas.draw()
-        rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
-        image = Image.fromarray(np.ascontiguousarray(rgb))
-        # an adaptive palette, then Floyd-Steinberg dithering: no banding in gradients
-        palette_image = image.quantize(colors=256, method=Image.Quantize.MEDIANCUT)
-        image.quantize(palette=palette_image, dither=Image.Dither.FLOYDSTEINBERG).save(
-            tmp, format="PNG", optimize=True)
-
-
-def plot_sweep(rows, path, experiment: Experiment) -> None:
-    """Error and relative time against the swept value (headless).
-
-    One colour per method; with groups (the filter test's sigma) one line
-    style per group.
-    """
-    from matplotlib.lines import Line2D
-
-    rows = _ok(rows)
-    series = _series(rows, experiment.name)
-    methods = list(dict.fromkeys(m for m, _ in series))
-    groups = list(dict.fromkeys(g for _, g in series if g))
-    styles = ("-", "--", ":", "-.")
-    markers = "os^Dv<>ph*"
-    fig = _figure(10.0, 3.6)
-    ax_err, ax_time = fig.subplots(1, 2)
-    for (method, group), pts in series.items():
-        k = methods.index(method)
-        g = groups.index(group) if group else 0
-        style = dict(color=f"C{k % 10}", ls=styles[g % len(styles)],
-                     marker=markers[g % len(markers)], ms=3, lw=1.2)
-        xs = [p[0] for p in pts]
-        ax_err.plot(xs, [_error_of(p[1]) for p in pts], **style)
-        ax_time.plot(xs, [_num(p[1]["relative_time"]) for p in pts], **style)
-    ax_time.axhline(1.0, color="k", lw=1, ls="--")
-    ax_err.set_ylabel("error (report's metric)")
-    ax_time.set_ylabel("relative time (method / full)")
-    ax_time.set_yscale("log")
-    _plain_ticks(ax_time.yaxis)
-    for ax in (ax_err, ax_time):
-        ax.set_xlabel(experiment.x_label)
-        ax.grid(True, alpha=0.3)
-    ax_err.set_ylim(bottom=0)
-    handles = [Line2D([], [], color=f"C{k % 10}", lw=2, label=m) for k, m in enumerate(methods)]
-    handles += [Line2D([], [], color="gray", ls=styles[g % len(styles)],
-                       marker=markers[g % len(markers)], ms=3, label=group)
-                for g, group in enumerate(groups)]
-    handles.append(Line2D([], [], color="k", ls="--", lw=1, label="full render"))
-    fig.legend(handles=handles, loc="center right", fontsize=7, frameon=False)
-    fig.suptitle(f"{experiment.name}: {experiment.title}", fontsize=9)
-    fig.tight_layout(rect=(0, 0, 0.83, 1))
-    _save(fig, path)
-
-
-def plot_tradeoff(rows, path, experiment: Experiment) -> None:
-    """Total time (log) against error (log), one panel per group, one marker per method."""
-    rows = _ok(rows)
-    groups = list(dict.fromkeys(r["group"] for r in rows))
-    fig = _figure(4.6 * max(len(groups), 1), 3.8)
-    axes = np.atleast_1d(fig.subplots(1, max(len(groups), 1)))
-    methods = list(dict.fromkeys(r["method"] for r in rows if r["method"] not in (
-        FULL, OIDN, OIDN_NOAUX, *EQUAL_TIME_BASELINES)))
-    markers = "osD^v<>ph*"
-    for ax, group in zip(axes, groups):
-        grows = [r for r in rows if r["group"] == group]
-        for name, style in ((FULL, "k-o"), (OIDN, "k--s"), (OIDN_NOAUX, "k:^")):
-            spp_curve = sorted([r for r in grows if r["method"] == name],
-                               key=lambda r: _num(r["total_s"]))
-            errs = [_error_of(r) for r in spp_curve]
-            if not (spp_curve and all(e > 0 for e in errs)):
-                continue
-            ax.plot([_num(r["total_s"]) for r in spp_curve], errs, style, ms=4,
-                    mfc="none" if name != FULL else None, label=f"{name} (spp)")
-            for r, e in zip(spp_curve if name == FULL else [], errs):
-                ax.annotate(f"{r['spp']} spp", (_num(r["total_s"]), e), fontsize=6,
-                            xytext=(3, 3), textcoords="offset points")
-        full = [r for r in grows if r["method"] == FULL]
-        for r in full:
-            if _error_of(r) <= 0:
-                ax.axvline(_num(r["total_s"]), color="k", ls="--", lw=1,
-                           label="full (exact)")
-        for k, m in enumerate(methods):
-            pts = sorted([r for r in grows if r["method"] == m],
-                         key=lambda r: _num(r["sample_fraction"]))
-            if not pts:
-                continue
-            xs, ys = [_num(r["total_s"]) for r in pts], [_error_of(r) for r in pts]
-            ax.plot(xs, ys, marker=markers[k % len(markers)], ms=4, lw=0.8, label=m,
-                    color=f"C{k % 10}")
-            for r, x, y in zip(pts, xs, ys):
-                ax.annotate(f"{_num(r['sample_fraction']):g}", (x, y), fontsize=6,
-                            xytext=(3, -8), textcoords="offset points")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        _plain_ticks(ax.xaxis), _plain_ticks(ax.yaxis)
-        conv = any(math.isfinite(_num(r.get("error_converged"))) for r in grows)
-        ax.set_ylabel("error vs converged reference" if conv else "error vs full render")
-        ax.set_xlabel("total time (s), median")
-        ax.set_title(group, fontsize=8)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=6, loc="best")
-    fig.suptitle(f"{experiment.name}: {experiment.title}; labels: sample fraction", fontsize=8)
-    fig.tight_layout()
-    _save(fig, path)
-
-
-def plot_triptych(path, reference, image, title: str, reference_title="reference", *,
-                  others=(), error_title="error, log10") -> None:
-    """Reference | MRT | error map of the MRT (log10 of the report's per-pixel error).
-
-    ``others``: more (title, image) panels, drawn between the MRT and its
-    error map.
-    """
-    from ..recon.metrics import error_map
-
-    panels = [(reference_title, reference), (title, image), *others]
-    fig = _figure(3.0 * (len(panels) + 1), 3.3)
-    axes = fig.subplots(1, len(panels) + 1)
-    for ax, (panel_title, panel) in zip(axes, panels):
-        ax.imshow(srgb_encode(panel))
-        ax.set_title(panel_title, fontsize=8)
-    errors = np.log10(np.clip(error_map(image, reference), 1e-4, 1.0))
-    im = axes[-1].imshow(errors, vmin=-4, vmax=0, cmap="inferno")
-    axes[-1].set_title(error_title, fontsize=8)
-    fig.colorbar(im, ax=axes[-1], fraction=0.046, pad=0.04)
-    for ax in axes:
-        ax.set_xticks([]), ax.set_yticks([])
-    fig.tight_layout()
-    _save(fig, path, palette=True)
-
-
 def _md_number(value, digits=4) -> str:
-    v = _num(value)
+    v = num(value)
     if not math.isfinite(v):
         return "-" if math.isnan(v) else _fmt(v)
     return f"{v:.{digits}g}"
@@ -285,7 +118,7 @@ def _md_number(value, digits=4) -> str:
 
 def markdown_tables(rows, experiment: Experiment) -> str:
     """The experiment's tables as markdown (no heading, no command)."""
-    ok = _ok(rows)
+    ok = ok_rows(rows)
     tables = {"tradeoff": _tradeoff_table, "gallery": _gallery_table,
               "denoise": lambda ok, _: denoise_tables(ok)}.get(experiment.kind, _sweep_tables)
     out = tables(ok, experiment)
@@ -324,14 +157,14 @@ def _tradeoff_table(ok, experiment: Experiment) -> list:
 def _sweep_tables(ok, experiment: Experiment) -> list:
     """A table per measure (error, relative time, ...): a row per method, a column per x."""
     out = []
-    lines = _series(ok, experiment.name)
+    lines = sweep_series(ok, experiment.name)
     xs = sorted({x for pts in lines.values() for x, _ in pts})
     head = "| method | " + " | ".join(f"{x:g}" for x in xs) + " |"
     sep = "| --- |" + " ---: |" * len(xs)
     full = {}
     for r in ok:
-        if r["method"] == FULL and math.isfinite(_num(r["x"])):
-            full[_num(r["x"])] = r
+        if r["method"] == FULL and math.isfinite(num(r["x"])):
+            full[num(r["x"])] = r
     if not full:  # one point, several settings: the full render is shared
         shared = [r for r in ok if r["method"] == FULL]
         full = {x: shared[0] for x in xs} if shared else {}
@@ -344,7 +177,7 @@ def _sweep_tables(ok, experiment: Experiment) -> list:
             ("Median total time (s)", "total_s", 3)):
         out += [f"{title}:", "", head, sep]
         for (method, group), pts in lines.items():
-            by_x = {x: dict(r, relative_min=_num(r.get("total_min_s")) / _num(
+            by_x = {x: dict(r, relative_min=num(r.get("total_min_s")) / num(
                 (full.get(x) or {}).get("total_min_s"))) for x, r in pts}
             label = method if not group else f"{method} {group}"
             out.append(f"| {label} | " + " | ".join(
@@ -383,18 +216,18 @@ def _gallery_table(ok, experiment: Experiment) -> list:
         method = r["method"] + (f" (time of {r['matched_method']})"
                                 if r["method"] in EQUAL_TIME_BASELINES else "")
         cells = [r["group"], method, r["spp"], _md_number(r["relative_time"], 3),
-                 _md_number(_error_of(r)), _md_number(_psnr_of(r), 4),
+                 _md_number(error_of(r)), _md_number(_psnr_of(r), 4),
                  _md_number(r.get("min_value"), 3)]
         out.append("| " + " | ".join(str(c) for c in cells) + " |")
     negative = []
     for scene in dict.fromkeys(r["group"] for r in ok):
         rows = [r for r in ok if r["group"] == scene]
         full = [r for r in rows if r["method"] == FULL]
-        if not full or not _num(full[0].get("min_value")) >= 0:
+        if not full or not num(full[0].get("min_value")) >= 0:
             continue
         below = [f"{r['method']} ({_md_number(r['min_value'], 3)})" for r in rows
                  if r["method"] not in (FULL, *EQUAL_TIME_BASELINES)
-                 and _num(r.get("min_value")) < 0]
+                 and num(r.get("min_value")) < 0]
         if below:
             negative.append(f"{scene}: " + ", ".join(below))
     out += ["", "Pixels below 0 where the full render has none: "
@@ -426,7 +259,7 @@ def _is_oidn(method: str) -> bool:
     return method in (OIDN, OIDN_NOAUX)
 
 
-def _is_mrt(method: str) -> bool:
+def is_mrt(method: str) -> bool:
     return method.startswith("mrt-")
 
 
@@ -436,7 +269,7 @@ def _curve_label(method: str, setting: str) -> str:
     if _is_oidn(method):
         return f"{method} {setting.split('=', 1)[-1]}"
     fraction = setting.split(",", 1)[0]
-    if _is_mrt(method) and fraction.startswith("f=") and fraction != _DEFAULT_FRACTION:
+    if is_mrt(method) and fraction.startswith("f=") and fraction != _DEFAULT_FRACTION:
         return f"{method} {fraction}"
     return method
 
@@ -444,8 +277,8 @@ def _curve_label(method: str, setting: str) -> str:
 def denoise_curves(rows) -> dict:
     """{scene group: {curve label: [(relative time, error, row)] by spp}} of the ok rows."""
     out = {}
-    for r in _ok(rows):
-        t, e = _num(r["relative_time"]), _num(r["error_converged"])
+    for r in ok_rows(rows):
+        t, e = num(r["relative_time"]), num(r["error_converged"])
         if not (math.isfinite(t) and math.isfinite(e)):
             continue
         group = _scene_of(r)
@@ -453,17 +286,17 @@ def denoise_curves(rows) -> dict:
         out.setdefault(group, {}).setdefault(label, []).append((t, e, r))
     for curves in out.values():
         for pts in curves.values():
-            pts.sort(key=lambda p: int(_num(p[2]["spp"])))
+            pts.sort(key=lambda p: int(num(p[2]["spp"])))
     return out
 
 
-def _reference_error(curves: dict) -> tuple[float, float]:
+def reference_error(curves: dict) -> tuple[float, float]:
     """(error, seconds) of the full render at the top of the ladder."""
     full = curves.get(FULL, [])
     if not full:
         return math.nan, math.nan
     top = full[-1][2]
-    return _num(top["error_converged"]), _num(top["total_s"]) / _num(top["relative_time"])
+    return num(top["error_converged"]), num(top["total_s"]) / num(top["relative_time"])
 
 
 def time_to_reach(points, target: float) -> tuple[float, str]:
@@ -503,7 +336,7 @@ def equal_time_verdict(curves: dict, up_to: float = EQUAL_TIME_UP_TO) -> dict:
     budget) and ``least_gain`` (the smallest OIDN / MRT error ratio where
     both fit). Where no MRT run fits within ``up_to`` it does not hold.
     """
-    mrt = [p for label, pts in curves.items() if _is_mrt(label) for p in pts]
+    mrt = [p for label, pts in curves.items() if is_mrt(label) for p in pts]
     oidn = [p for label, pts in curves.items() if label.split()[0] in (OIDN, OIDN_NOAUX)
             for p in pts]
     budgets = sorted({t for t, _, _ in mrt + oidn if t <= up_to} | {up_to})
@@ -529,7 +362,7 @@ def _best(curves: dict, target: float, which) -> tuple[str, float, str]:
         if not which(label):
             continue
         t, how = time_to_reach(pts, target)
-        if math.isfinite(t) and not t >= _num(best[1]):
+        if math.isfinite(t) and not t >= num(best[1]):
             best = (label, t, how)
     return best
 
@@ -547,9 +380,9 @@ def _scene_of(r) -> str:
 def noise_floors(rows) -> dict:
     """{scene: {MRT method: error}} of the rows of a noise-free trace."""
     out = {}
-    for r in _ok(rows):
-        if r["setting"] == NOISE_FREE and math.isfinite(_num(r["error_converged"])):
-            out.setdefault(_scene_of(r), {})[r["method"]] = _num(r["error_converged"])
+    for r in ok_rows(rows):
+        if r["setting"] == NOISE_FREE and math.isfinite(num(r["error_converged"])):
+            out.setdefault(_scene_of(r), {})[r["method"]] = num(r["error_converged"])
     return out
 
 
@@ -559,9 +392,9 @@ def denoise_summary(rows) -> list:
     out = []
     floors = noise_floors(rows)
     for group, curves in denoise_curves(rows).items():
-        e64, t64 = _reference_error(curves)
+        e64, t64 = reference_error(curves)
         a = equal_time_verdict(curves)
-        mrt = _best(curves, e64, _is_mrt)
+        mrt = _best(curves, e64, is_mrt)
         oidn = _best(curves, e64, lambda label: label.split()[0] in (OIDN, OIDN_NOAUX))
         target = EQUAL_ERROR_TARGETS["paper_fig1" if group == "paper_fig1" else "gallery"]
         floor = min(floors.get(group, {}).items(), key=lambda kv: kv[1],
@@ -576,9 +409,9 @@ def _denoise_stage(rows) -> dict:
     """{scene: (median, largest) of the MRT's ``denoise`` stage, relative to the full render}."""
     out = {}
     for group, curves in denoise_curves(rows).items():
-        _, t64 = _reference_error(curves)
-        stages = [_num(r.get("denoise_s")) / t64 for label, pts in curves.items()
-                  if _is_mrt(label) and denoised_mode(label)[1] for _, _, r in pts]
+        _, t64 = reference_error(curves)
+        stages = [num(r.get("denoise_s")) / t64 for label, pts in curves.items()
+                  if is_mrt(label) and denoised_mode(label)[1] for _, _, r in pts]
         stages = [s for s in stages if math.isfinite(s)]
         if stages:
             out[group] = (float(np.median(stages)), max(stages))
@@ -642,7 +475,7 @@ def denoise_tables(rows) -> list:
             "| --- | --- | ---: | ---: | ---: |"]
     floors = noise_floors(rows)
     for group, curves in denoise_curves(rows).items():
-        e64, _ = _reference_error(curves)
+        e64, _ = reference_error(curves)
         for label, pts in curves.items():
             t, how = time_to_reach(pts, e64)
             floor = floors.get(group, {}).get(label)
@@ -660,7 +493,7 @@ def denoise_tables(rows) -> list:
         oidn = {label: pts for label, pts in curves.items()
                 if label.split()[0] in (OIDN, OIDN_NOAUX)}
         for label, pts in curves.items():
-            if not _is_mrt(label):
+            if not is_mrt(label):
                 continue
             for t, e, r in pts:
                 near = [min(p, key=lambda q: abs(math.log(q[0] / t))) + (name,)
@@ -673,71 +506,3 @@ def denoise_tables(rows) -> list:
                            f"{_md_number(ot, 3)} | {_md_number(oe)} | "
                            f"{_md_number(e / oe, 3)} |")
     return out
-
-
-def plot_denoise(rows, path, experiment: Experiment) -> None:
-    """Error (log) against relative time (log): a panel per scene, a curve per method.
-
-    MRT modes in colour (dashed: with ``denoise``), the full render black,
-    ``oidn`` grey (dashed: without guides; open markers: balanced quality);
-    the dotted lines are the full render's error and the equal-time limit.
-    """
-    from matplotlib.lines import Line2D
-
-    scenes = denoise_curves(rows)
-    n = max(len(scenes), 1)
-    cols = min(n, 5)
-    nrows = math.ceil(n / cols)
-    fig = _figure(3.2 * cols + 1.8, 2.9 * nrows)
-    axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
-    modes = list(dict.fromkeys(denoised_mode(label.split()[0])[0]
-                               for curves in scenes.values() for label in curves
-                               if _is_mrt(label)))
-    handles = {}
-    for ax, (group, curves) in zip(axes, scenes.items()):
-        e64, _ = _reference_error(curves)
-        for label, pts in curves.items():
-            if label == FULL:
-                style = dict(color="k", ls="-", marker="o")
-            elif label.split()[0] in (OIDN, OIDN_NOAUX):
-                method, quality = (label.split() + [""])[:2]
-                style = dict(color="0.55", ls="--" if method == OIDN_NOAUX else "-",
-                             marker="s", mfc="none" if quality == "balanced" else "0.55")
-            else:
-                mode, denoised = denoised_mode(label.split()[0])
-                k = modes.index(mode)
-                fraction = (label.split() + [""])[1]
-                style = dict(color=f"C{k % 10}",
-                             marker={"": "^", "f=0.05": "v", "f=0.2": "D"}.get(fraction, "x"),
-                             ls=":" if denoised.count("-") else "--" if denoised else "-")
-            line, = ax.plot([p[0] for p in pts], [p[1] for p in pts], ms=3, lw=1.0, **style)
-            handles.setdefault(label, line)
-        if math.isfinite(e64):
-            ax.axhline(e64, color="k", ls=":", lw=0.8)
-        ax.axvline(EQUAL_TIME_UP_TO, color="r", ls=":", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        _plain_ticks(ax.xaxis), _plain_ticks(ax.yaxis)
-        ax.set_title(group, fontsize=8)
-        ax.tick_params(labelsize=6)
-        ax.grid(True, which="both", alpha=0.3)
-    for ax in axes[len(scenes):]:
-        ax.set_visible(False)
-    for ax in axes[::cols]:
-        ax.set_ylabel("error vs converged", fontsize=7)
-    for ax in axes[-cols:]:
-        ax.set_xlabel("time / full render at top spp", fontsize=7)
-    extra = [Line2D([], [], color="k", ls=":", lw=0.8, label="full render's error"),
-             Line2D([], [], color="r", ls=":", lw=0.8,
-                    label=f"equal time up to {EQUAL_TIME_UP_TO:g}")]
-    fig.legend(handles=list(handles.values()) + extra,
-               labels=list(handles) + [h.get_label() for h in extra],
-               loc="center right", fontsize=6, frameon=False)
-    beyond = sorted({int(_num(p[2]["spp"])) for curves in scenes.values()
-                     for pts in curves.values() for p in pts} - set(experiment.ladder))
-    fig.suptitle(f"{experiment.name}: {experiment.title}; each curve: spp "
-                 f"{', '.join(str(s) for s in experiment.ladder)}"
-                 + (f" (some MRT curves also {', '.join(map(str, beyond))})" if beyond else ""),
-                 fontsize=8)
-    fig.tight_layout(rect=(0, 0, 1 - 1.6 / (3.2 * cols + 1.8), 1))
-    _save(fig, path)
