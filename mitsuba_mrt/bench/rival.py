@@ -35,7 +35,7 @@ LIMITS = (0.1, 0.25, 0.5)
 CONFIGS = tuple((m, d) for d in ("none", "oidn") for m in ("fast", "refine", "idpass"))
 #: Samples per pixel of the converged renders errors are measured against
 #: (rendered as several passes of 64 averaged).
-CONVERGED_SPP = 1024
+CONVERGED_SPP = 512
 QUICK_CONVERGED_SPP = 256
 
 
