@@ -5,9 +5,14 @@ from scene knowledge: which shape each pixel sees and which lights reach it.
 
 The package is arranged in wings whose imports point one way (see
 docs/ARCHITECTURE.md): :mod:`.recon` (numpy stages), :mod:`.modes` (the
-reconstruction modes and :func:`reconstruct`), :mod:`.render` (everything
-that imports Mitsuba), :mod:`.runtime` (threads and opt-in process
-tuning), :mod:`.app` (command line) and :mod:`.bench` (experiments).
+reconstruction modes, :func:`reconstruct` and ``auto``'s planner),
+:mod:`.renderer` (everything that imports Mitsuba), :mod:`.runtime`
+(threads and opt-in process tuning), :mod:`.app` (command line) and
+:mod:`.bench` (experiments).
+
+``__all__`` is the user API; the stage types (``SparseTrace``,
+``SamplePattern``, ...) are importable from :mod:`.types` and their
+modules (and, for now, from here).
 
 Importing the package registers the integrator plugins ``mrt`` and
 ``matte`` with Mitsuba for the active variant, and again whenever the
@@ -23,9 +28,8 @@ from .types import MRTParams, Reconstruction, Skips, SparseTrace, Timings
 
 __version__ = "0.1.0"
 
-__all__ = ["MODES", "MRTError", "MRTParams", "MRTWarning", "MRTResult", "Reconstruction", "SamplePattern",
-           "Skips", "SparseTrace", "Timings", "activate", "grid_pattern", "load_scene",
-           "reconstruct", "register", "render", "render_reference"]
+__all__ = ["MODES", "MRTError", "MRTParams", "MRTResult", "MRTWarning", "activate",
+           "load_scene", "reconstruct", "register", "render", "render_reference"]
 
 
 def activate(variant: str = "auto") -> str:
