@@ -27,8 +27,9 @@ from ..errors import MRTError
 
 #: The kinds of candidate: ``full`` is ``mi.render`` itself; ``denoised`` a
 #: full render with a box pixel filter through OIDN, with albedo and normal
-#: guides from the same samples; ``mrt`` one of the MRT's modes.
-KINDS = ("full", "denoised", "mrt")
+#: guides from the same samples; ``passes`` the same without a denoiser;
+#: ``mrt`` one of the MRT's modes.
+KINDS = ("full", "denoised", "passes", "mrt")
 
 
 @dataclass(frozen=True)
@@ -39,7 +40,7 @@ class Candidate:
     ----------
     name : str
         What a user reads: ``full``, ``full+oidn``, ``refine+oidn``, ...
-    kind : {'full', 'denoised', 'mrt'}
+    kind : {'full', 'denoised', 'passes', 'mrt'}
     spp : int
         Samples per traced pixel.
     mode : str or None
@@ -94,6 +95,9 @@ class Plan:
         Pixels the pilot traced (each trace counted).
     notes : list of str
         What the plan could not consider (OIDN missing, ...).
+    passes : list of (int, float)
+        For a denoised full render made in passes: after each round, the
+        spp of the half that was denoised and its estimated error.
     """
 
     choice: Candidate
@@ -105,6 +109,7 @@ class Plan:
     pilot_s: float = 0.0
     pilot_pixels: int = 0
     notes: list = field(default_factory=list)
+    passes: list = field(default_factory=list)
 
 
 def choose(candidates: list, *, target_error: float | None = None,

@@ -100,9 +100,9 @@ class GridTracer:
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
-                 pad: bool = False, box: bool = False) -> SparseTrace:
+                 pad: bool = False, box: bool = False, ids: bool = True) -> SparseTrace:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
-                            self.seed + int(stream), aovs, radiance, replay, pad, box)
+                            self.seed + int(stream), aovs, radiance, replay, pad, box, ids)
 
 
 def _check_spp(spp: int | None) -> int | None:
@@ -150,15 +150,21 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     pattern = grid_pattern(width, height, params.sample_fraction)
     plan = None
     if mode == "auto":
-        plan = (auto.plan_without_pilot(width, height, spp, is_jit(), params)
-                or auto.plan(scene, pattern, tracer, params, start))
+        plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
+        if plan is None:
+            outcome = auto.run_auto(scene, pattern, tracer, params, start)
+            plan = outcome.plan
+            if outcome.image is not None:
+                return _passes_result(outcome, tracer, params, start)
         choice = plan.choice
         if choice.kind == "full":
             image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, choice.spp, seed)
             return _full_result(image, alpha, params, choice, plan,
                                 Timings(check=plan.pilot_s, full_render=seconds), start)
-        if choice.kind == "denoised":
-            return _denoised_full(replace(tracer, spp=choice.spp), params, plan, start)
+        if choice.kind == "denoised":  # the passes again, now without a way out
+            outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False)
+            outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
+            return _passes_result(outcome, tracer, params, start)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
     return _mrt(pattern, tracer, params, mode, plan, start)
@@ -202,6 +208,23 @@ def _denoised_full(tracer: GridTracer, params: MRTParams, plan: Plan, start: flo
     return MRTResult(image, ids, np.ones((height, width), dtype=bool), None, trace, params,
                      trace.spp, "auto", "full+oidn", timings.close(time.perf_counter() - start),
                      auto=plan, traced=TracedCounts(full=width * height), alpha=alpha)
+
+
+def _passes_result(outcome: auto.AutoOutcome, tracer: GridTracer, params: MRTParams,
+                   start: float) -> MRTResult:
+    """The image ``auto``'s denoised passes made (:mod:`.progressive`)."""
+    image, progress, plan = outcome.image, outcome.progress, outcome.plan
+    check_radiance(image, "pixels")
+    height, width = image.shape[:2]
+    rgba = tracer.sensor.film().base_channels_count() == 4
+    timings = Timings(trace=progress.trace_s, check=progress.estimate_s,
+                      denoise=progress.denoise_s)
+    return MRTResult(image, np.zeros((height, width), dtype=np.int64),
+                     np.ones((height, width), dtype=bool), None, _empty_trace(progress.spp),
+                     params, progress.spp, "auto", plan.choice.name,
+                     timings.close(time.perf_counter() - start), auto=plan,
+                     traced=TracedCounts(full=width * height),
+                     alpha=outcome.alpha if rgba else None)
 
 
 def _full_result(image, alpha, params, choice, plan, timings, start) -> MRTResult:

@@ -1,67 +1,147 @@
-"""Mode ``auto``: a measured plan over full renders, denoised full renders and the MRT.
+"""Mode ``auto``: denoised passes, a full render or the MRT, by measurement.
 
-:func:`plan` runs the pilot (:mod:`.pilot`) and hands its candidates to
-the planner (:func:`mitsuba_mrt.modes.plan.choose`) under the render's
-controls: ``noise_threshold`` (default: the full render's own error at the
-scene's spp) and ``time_limit`` (the pilot's own time counted against it).
-:func:`plan_without_pilot` is the plan where no pilot is worth running.
+:func:`run_auto` first renders the image in denoised passes
+(:mod:`.progressive`): each pass is part of the image, and the passes
+measure how good the denoised image gets, so the common case spends nothing
+on planning.  Under a time limit the passes fill it.  Without one they go
+on until the estimated error meets ``noise_threshold`` (default: the full
+render's own noise at the scene's spp), unless the first round predicts that
+meeting it in passes costs more than a full render:
+then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the image
+where their grid costs less, and the planner (:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest
+candidate that meets the target.  :func:`plan_without_pilot` is the plan
+where nothing is worth measuring.
 """
 
 from __future__ import annotations
 
+import math
 import time
+from dataclasses import dataclass
 
 import mitsuba as mi
+import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
+from ..recon.denoise import oidn_available
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams
-from .pilot import run_pilot
+from .pilot import effective_area, run_pilot, strips_of
+from .progressive import DEFAULT_RATE, Progress, run_passes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
 AUTO_MIN_SAMPLES = 1 << 21
-#: The share of what is left of a time limit after the pilot that the
-#: render's predicted time may fill (predictions are a pilot's, not exact).
+#: The share of a time limit the passes may plan to fill (the final OIDN call
+#: and the machine's noise take the rest).
 TIME_MARGIN = 0.9
+#: A pass (1 spp with albedo and normals) costs about this many plain samples:
+#: a full render's cost, predicted from the passes' own.
+PASS_SAMPLES = 2.0
+#: Under a time limit the passes may take up to this many times the scene's spp.
+LIMIT_SPP_FACTOR = 4
+
+
+@dataclass
+class AutoOutcome:
+    """``auto``'s plan, and the image when the passes made it."""
+
+    plan: Plan
+    image: np.ndarray | None = None
+    alpha: np.ndarray | None = None
+    progress: Progress | None = None
 
 
 def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
                        params: MRTParams) -> Plan | None:
-    """The plan where no pilot is worth running (a full render), else None.
+    """The plan where nothing is worth measuring (a full render), else None.
 
     The scalar variant traces pixel by pixel in Python while ``mi.render``
     runs Mitsuba's multithreaded C++ loop, so only a full render can win
-    there; below ``AUTO_MIN_SAMPLES`` samples the pilot would cost more than
-    it could save.
+    there; below ``AUTO_MIN_SAMPLES`` samples the passes' launches would cost
+    more than they could save.
     """
     if jit and width * height * spp >= AUTO_MIN_SAMPLES:
         return None
     reason = ("the scalar variant renders in full" if not jit
-              else "too few samples for a pilot to pay")
+              else "too few samples for a plan to pay")
     return Plan(Candidate("full", "full", spp), reason, time_limit=params.time_limit,
                 target_error=params.noise_threshold)
 
 
-def plan(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
-         started: float) -> Plan:
-    """Measure the candidates with a pilot and choose one.
+def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
+             started: float, escape: bool = True) -> AutoOutcome:
+    """The plan of the module; the image too where the passes made it.
 
-    ``started`` is the render's ``time.perf_counter()`` at its start: what
-    is left of ``params.time_limit`` is counted from it.
+    ``started`` is the render's ``time.perf_counter()`` at its start: a time
+    limit is counted from it.  Without ``escape`` the passes run to the
+    target whatever the first round predicts.
     """
+    spp, limit = tracer.spp, params.time_limit
+    width, height = pattern.width, pattern.height
+    denoise = oidn_available()
+    notes = [] if denoise else ["Intel Open Image Denoise is not installed (pip install "
+                                "pyoidn): the plan considers no denoising"]
+    if not denoise and limit is None:
+        return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
+                                target_error=params.noise_threshold, notes=notes))
+    area = effective_area(tracer.sensor.film().rfilter())
+    rows = np.concatenate([np.arange(s.top, s.top + s.height) for s in strips_of(pattern)])
+    deadline = None if limit is None else started + TIME_MARGIN * limit
+    costs = {}
+
+    def stop_early(progress: Progress, pass_s: float):
+        """Whether passes are the wrong plan for the target: the reason, or None."""
+        if deadline is not None or not denoise:
+            return None
+        target = params.noise_threshold or progress.full_error
+        half, error = progress.history[-1]
+        needed = half * (error / target) ** (1 / DEFAULT_RATE) if target > 0 else math.inf
+        costs.update(passes=needed * pass_s, full=spp * pass_s / PASS_SAMPLES,
+                     mrt=params.sample_fraction * spp * pass_s, passes_spp=needed,
+                     target=target, full_error=progress.full_error)
+        if costs["passes"] <= costs["full"]:
+            return None
+        return "passes would cost more than a full render"
+
+    image, alpha, progress = run_passes(
+        tracer, width, height, rows, quality=params.denoise_quality,
+        target_error=params.noise_threshold, deadline=deadline,
+        max_spp=spp * (LIMIT_SPP_FACTOR if limit is not None else 1), full_spp=spp, area=area,
+        denoise=denoise, stop_early=stop_early if escape else None)
+    if image is not None:
+        name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
+        choice = Candidate(name, kind, progress.spp, denoise=denoise,
+                           seconds=progress.trace_s + progress.denoise_s,
+                           error=progress.predicted)
+        plan = Plan(choice, f"denoised passes: {progress.stopped}",
+                    target_error=params.noise_threshold or (
+                        None if limit is not None else progress.full_error),
+                    time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
+                    passes=list(progress.history))
+        return AutoOutcome(plan, image, alpha, progress)
+    return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress, costs: dict,
+                   notes: list) -> Plan:
+    """The planner's choice among a full render, more passes and the MRT's modes
+    (measured by the pilot where its grid is cheaper than both others)."""
     begin = time.perf_counter()
-    budget = None
-    if params.time_limit is not None:
-        budget = max(params.time_limit - (begin - started), 0.0) * TIME_MARGIN
-    pilot = run_pilot(scene, pattern, tracer, params, params.noise_threshold, budget)
-    now = time.perf_counter()
-    target = params.noise_threshold
-    if target is None and params.time_limit is None:
-        target = pilot.full_error
-    if params.time_limit is not None:
-        budget = max(params.time_limit - (now - started), 0.0) * TIME_MARGIN
-    out = choose(pilot.candidates, target_error=target, time_limit=budget)
-    out.time_limit, out.budget_s = params.time_limit, budget
-    out.pilot_s, out.pilot_pixels, out.notes = now - begin, pilot.pixels, pilot.notes
-    return out
+    candidates = [Candidate("full", "full", tracer.spp, seconds=costs["full"],
+                            error=costs["full_error"]),
+                  Candidate("full+oidn", "denoised",
+                            int(min(costs["passes_spp"], tracer.spp)),
+                            denoise=True, seconds=costs["passes"], error=costs["target"])]
+    pixels = 0
+    if costs["target"] > 0 and costs["mrt"] < min(costs["full"], costs["passes"]):
+        pilot = run_pilot(scene, pattern, tracer, params, costs["target"],
+                          min(costs["full"], costs["passes"]), denoised=False)
+        candidates += [c for c in pilot.candidates if c.kind == "mrt"]
+        notes += pilot.notes
+        pixels = pilot.pixels
+    plan = choose(candidates, target_error=costs["target"])
+    plan.reason = f"{progress.stopped}; {plan.reason}"
+    plan.pilot_s = progress.trace_s + progress.estimate_s + time.perf_counter() - begin
+    plan.pilot_pixels, plan.notes, plan.passes = pixels, notes, list(progress.history)
+    return plan

@@ -108,13 +108,16 @@ def _timed(trace_fn, *args, **kwargs) -> tuple[SparseTrace, float]:
 
 
 def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
-              target_error: float | None = None, budget: float | None = None) -> PilotResult:
+              target_error: float | None = None, budget: float | None = None,
+              denoised: bool = True) -> PilotResult:
     """Measure the candidates on :func:`strips_of` ``pattern`` (see the module).
 
     ``target_error`` (None: the full render's at the scene's spp, unless a
     ``budget`` is given) and ``budget`` (seconds) let it skip the MRT's
     candidates, and their traces, where their grid alone would cost more than
     the cheapest candidate already known to meet the target, or than the budget.
+    Without ``denoised`` the denoised full renders are left out (``auto``'s
+    passes measure those themselves, :mod:`.progressive`).
     """
     strips = strips_of(pattern)
     width, spp, pixels = pattern.width, tracer.spp, pattern.width * pattern.height
@@ -133,7 +136,7 @@ def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams
                   for s in _halvings(spp)]
     result = PilotResult(candidates, ref.full_error(spp, area), 2 * n, compile_ref, [])
     denoising = oidn_available()
-    if denoising:
+    if denoising and denoised:
         count = min(LADDER[-1], spp)
         ones, compile_box = _timed(replace(tracer, spp=1), np.tile(xy, (count, 1)),
                                    stream=SeedStream.LADDER, replay=True, box=True)
@@ -144,7 +147,7 @@ def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams
         aov_px = one_px * spp  # the grid's cost per pixel, until it is measured
         candidates += _denoised(ref, strips, width, ladder, params, pixels, one_px, aov_px,
                                 spp, compile_box)
-    else:
+    elif not denoising:
         result.notes.append("Intel Open Image Denoise is not installed (pip install pyoidn): "
                             "the plan considers no denoising")
     if target_error is None and budget is None:

@@ -251,16 +251,10 @@ def _rgb(value, wavelengths, active=True):
     return mi.Color3f(value)
 
 
-def _directional_albedo(scene, sampler, ray, active):
-    """(albedo, hit): see :func:`_albedo_along`; ``hit`` where the camera ray hit."""
-    si = scene.ray_intersect(ray, active)
-    hit = si.is_valid() if is_jit() else bool(active and si.is_valid())
-    return _albedo_along(scene, sampler, ray, active), hit
-
-
 def _albedo_along(scene, sampler, ray, active):
     """What multiplies the light arriving at the first hit: its BSDF's albedo
-    for the view direction, one BSDF sample's weight, clamped to [0, 1] (RGB).
+    for the view direction, one BSDF sample's weight, clamped to [0, 1] (RGB);
+    with whether the camera ray hit and the shading normal at its hit.
 
     Through mirrors and glass (delta BSDFs) the path is followed, up to
     ``MIRROR_DEPTH`` bounces, and the albedo is that of the surface seen
@@ -271,9 +265,14 @@ def _albedo_along(scene, sampler, ray, active):
     throughput = mi.Color3f(1.0)
     ray = mi.Ray3f(ray)
     active = mi.Bool(active) if is_jit() else bool(active)
+    hit, normal = None, None
     for depth in range(MIRROR_DEPTH + 1):
         si = scene.ray_intersect(ray, active)
         valid = active & si.is_valid() if is_jit() else bool(active and si.is_valid())
+        if depth == 0:
+            hit = valid
+            normal = dr.select(valid, si.sh_frame.n, 0.0) if is_jit() else (
+                si.sh_frame.n if valid else mi.Vector3f(0.0))
         if not (is_jit() or valid):
             break
         bsdf = si.bsdf(ray)
@@ -288,7 +287,7 @@ def _albedo_along(scene, sampler, ray, active):
         active = valid & (bs.pdf > 0.0) & logical_not(done)
         throughput = throughput * weight
         ray = si.spawn_ray(si.to_world(bs.wo))
-    return albedo
+    return albedo, hit, normal
 
 
 def shadow_rule(scene: mi.Scene, lights: list) -> str:
@@ -443,8 +442,9 @@ VARIANCE_FLOOR = 1e-6
 
 #: Channels of the image block the samples are developed in: weighted RGB,
 #: alpha, the weight, RGB squared (for the variance), albedo and its weight,
-#: and the count of samples whose radiance was NaN or Inf.
-_CHANNELS = 13
+#: the count of samples whose radiance was NaN or Inf, and the shading normal
+#: (weighted as the albedo).
+_CHANNELS = 16
 
 
 @dataclass
@@ -455,12 +455,13 @@ class _Developed:
     alpha: np.ndarray     # (n,)
     variance: np.ndarray  # (n, 3) of a single sample's RGB about the pixel's mean
     albedo: np.ndarray    # (n, 3)
+    normal: np.ndarray | None = None  # (n, 3) the samples' mean shading normal
 
 
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True, replay: bool = False,
-                 pad: bool = False, box: bool = False) -> SparseTrace:
+                 pad: bool = False, box: bool = False, ids: bool = True) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -498,6 +499,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         Develop the samples with a box pixel filter instead of the film's:
         every pixel from the samples inside it alone, so that no two pixels
         share a sample (what a denoiser wants of a full render).
+    ids : bool
+        With ``aovs``: also the ids (one ray through each pixel's centre), and
+        the normal at that centre; without: no ids, and the normal of the
+        samples' own first hits (a denoiser's guide, as their albedo is).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -507,7 +512,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         size = padded_size(n)
         padded = np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], size - n, axis=0)])
         return trace_pixels(scene, sensor, integrator, padded, spp, seed, aovs, radiance,
-                            replay=True, box=box).take(slice(0, n))
+                            replay=True, box=box, ids=ids).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
@@ -525,17 +530,21 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
             sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
             samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
                               seed, True, replay, box)
-        if aovs:
+        if aovs and ids:
             shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
                 scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
+        elif aovs:
+            shape_index, visible, path_id = zero, np.zeros(n, np.uint32), zero
+            normal = samples.normal
         else:
             shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if not (radiance or aovs):
         samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)))
-    if aovs:  # only a surface seen at the pixel's centre is demodulated, and not a black one
+    if aovs and ids:  # only a surface seen at the pixel's centre is demodulated
         samples.albedo[shape_index == 0] = 0.0
+    if aovs:  # and not a black one
         samples.albedo[samples.albedo < ALBEDO_MIN] = 0.0
-    curved = curved_mirror_indices(scene) if aovs else np.zeros(0, np.int64)
+    curved = curved_mirror_indices(scene) if aovs and ids else np.zeros(0, np.int64)
     return SparseTrace(samples.radiance if radiance else np.zeros((n, 3)),
                        samples.albedo if aovs else np.zeros((n, 3)), shape_index, visible,
                        len(lights), spp, time.perf_counter() - start,
@@ -555,13 +564,15 @@ def _read_sums(sums: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
     per_weight = reciprocal(sums[:, 4])[:, None]
     radiance = sums[:, 0:3] * per_weight
     second = sums[:, 5:8] * per_weight
-    albedo = sums[:, 8:11] * reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
+    per_albedo_weight = reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
+    albedo = sums[:, 8:11] * per_albedo_weight
     radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
     variance = second - radiance ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)
     variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
     return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance,
-                      np.clip(albedo, 0.0, 1.0))
+                      np.clip(albedo, 0.0, 1.0),
+                      np.clip(sums[:, 13:16] * per_albedo_weight, -1.0, 1.0))
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -678,13 +689,14 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
         invalid = dr.select(active & ~finite, 1.0, 0.0)
         rgb = dr.select(active & finite, rgb, 0.0)
         alpha = dr.select(active & valid, 1.0, 0.0)
-    a_weight, a_rgb = zero, mi.Color3f(0.0)
+    a_weight, a_rgb, normal = zero, mi.Color3f(0.0), mi.Vector3f(0.0)
     if albedo:  # averaged over the samples that hit a surface
-        a_rgb, hit = _directional_albedo(scene, sampler, ray, active)
+        a_rgb, hit, normal = _albedo_along(scene, sampler, ray, active)
         a_weight = dr.select(active & hit, weight, 0.0)
     values = [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
-              a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid]
+              a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid,
+              a_weight * normal.x, a_weight * normal.y, a_weight * normal.z]
     # Evaluate once: each reduction below would otherwise re-run the integrator.
     dr.eval(values)
     if every:
@@ -745,12 +757,14 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
                 alpha = 1.0 if valid else 0.0
                 if not np.isfinite(rgb).all():
                     rgb, invalid = np.zeros(3), 1.0
-            a_rgb, a_weight = np.zeros(3), 0.0
+            a_rgb, a_weight, normal = np.zeros(3), 0.0, np.zeros(3)
             if albedo:
-                a_rgb, hit = _directional_albedo(scene, sampler, ray, True)
+                a_rgb, hit, normal = _albedo_along(scene, sampler, ray, True)
                 a_rgb, a_weight = np.asarray(a_rgb, np.float64), weight if hit else 0.0
+                normal = np.asarray(normal, np.float64)
             values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
-                                     a_weight * a_rgb, [a_weight, invalid]])
+                                     a_weight * a_rgb, [a_weight, invalid],
+                                     a_weight * normal])
             if every:
                 block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
             else:

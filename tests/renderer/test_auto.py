@@ -93,94 +93,109 @@ def scene(variant):
     return mi.load_string(scene_xml(512))  # 2^18 pixels x 8 spp: a pilot runs
 
 
+def strip_pilot(scene, **kwargs):
+    from mitsuba_mrt.recon.sampling import grid_pattern
+    from mitsuba_mrt.renderer.api import GridTracer
+
+    sensor = scene.sensors()[0]
+    tracer = GridTracer(scene, sensor, scene.integrator(), 8, 0)
+    return pilot.run_pilot(scene, grid_pattern(512, 512, 0.1), tracer, MRTParams(), **kwargs)
+
+
 def test_the_pilot_measures_every_kind_of_candidate(scene):
-    result = mitsuba_mrt.render(scene, time_limit=1e6)  # no pruning: the MRT is measured too
-    plan = result.auto
-    kinds = {c.kind for c in plan.candidates}
+    result = strip_pilot(scene, budget=1e6)  # no pruning: the MRT is measured too
+    kinds = {c.kind for c in result.candidates}
     assert kinds == {"full", "denoised", "mrt"}
-    assert all(c.seconds > 0 and c.error >= 0 for c in plan.candidates)
-    fulls = sorted((c for c in plan.candidates if c.kind == "full"), key=lambda c: c.spp)
+    assert all(c.seconds > 0 and c.error >= 0 for c in result.candidates)
+    fulls = sorted((c for c in result.candidates if c.kind == "full"), key=lambda c: c.spp)
     # a full render's error is its noise: it halves as the spp quadruple
     assert fulls[-1].spp == 8 and fulls[0].spp == 1
     assert fulls[0].error == pytest.approx(fulls[-1].error * math.sqrt(8), rel=1e-9)
-    # more samples through the denoiser: no worse by more than the estimate's noise
-    denoised = sorted((c for c in plan.candidates if c.kind == "denoised"), key=lambda c: c.spp)
+    denoised = sorted((c for c in result.candidates if c.kind == "denoised"),
+                      key=lambda c: c.spp)
     assert [c.spp for c in denoised] == [1, 2, 4, 8]
     assert denoised[-1].error < 1.1 * denoised[0].error
-    assert plan.pilot_s > 0 and plan.pilot_pixels > 0
-    assert result.timings.check == plan.pilot_s
+    assert result.pixels > 0
 
 
 def test_the_pilots_errors_follow_the_truth(scene):
     # a denoised 1-spp render beats a plain 1-spp render, as the pilot predicts
-    plan = mitsuba_mrt.render(scene, time_limit=1e6).auto
-    by = {(c.name, c.spp): c for c in plan.candidates}
+    by = {(c.name, c.spp): c for c in strip_pilot(scene, budget=1e6).candidates}
     truth = mitsuba_mrt.render_reference(scene, spp=256)[0]
-
-    def rel(image):
-        shown = (truth <= 1).all(axis=-1)
-        return float(np.sqrt(np.mean((np.clip(image, 0, 1) - truth)[shown] ** 2)
-                             / np.mean(truth[shown] ** 2)))
-
-    plain = rel(mitsuba_mrt.render_reference(scene, spp=1, seed=7)[0])
-    assert by[("full", 1)].error == pytest.approx(plain, rel=0.25)
+    shown = (truth <= 1).all(axis=-1)
+    plain = mitsuba_mrt.render_reference(scene, spp=1, seed=7)[0]
+    error = float(np.sqrt(np.mean((np.clip(plain, 0, 1) - truth)[shown] ** 2)
+                          / np.mean(truth[shown] ** 2)))
+    assert by[("full", 1)].error == pytest.approx(error, rel=0.25)
     assert by[("full+oidn", 1)].error < by[("full", 1)].error
 
 
-def test_a_full_render_the_planner_chooses_is_mi_renders_own(scene, monkeypatch):
-    def pick_full(candidates, **_):
-        return Plan(next(c for c in candidates if c.kind == "full" and c.spp == 8), "test")
+def forced(monkeypatch, candidate):
+    monkeypatch.setattr(auto, "run_auto",
+                        lambda *args, **kwargs: auto.AutoOutcome(Plan(candidate, "test")))
 
-    monkeypatch.setattr(auto, "choose", pick_full)
+
+def test_a_full_render_the_planner_chooses_is_mi_renders_own(scene, monkeypatch):
+    forced(monkeypatch, Candidate("full", "full", 8))
     result = mitsuba_mrt.render(scene, seed=3)
     image = np.array(mi.render(scene, seed=3), dtype=np.float64)[..., :3]
     assert result.mode_used == "full" and result.auto.reason == "test"
     assert np.array_equal(result.image, image)
 
 
-def test_a_denoised_full_render_traces_every_pixel_and_denoises(scene, monkeypatch):
-    def pick(candidates, **_):
-        return Plan(next(c for c in candidates if c.kind == "denoised" and c.spp == 2), "test")
-
-    monkeypatch.setattr(auto, "choose", pick)
+def test_a_noise_free_scene_is_rendered_in_full(variant):
+    # matte has no noise: no denoised image meets a full render's error of 0
+    scene = mi.load_string(scene_xml(512).replace(
+        '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
+        '<integrator type="matte"/>'))
     result = mitsuba_mrt.render(scene)
-    assert result.mode_used == "full+oidn" and result.spp == 2
+    assert result.mode_used == "full" and "cost more than a full render" in result.auto.reason
+    assert np.array_equal(result.image, mitsuba_mrt.render_reference(scene)[0])
+
+
+def test_by_default_the_passes_meet_the_full_renders_noise(scene):
+    result = mitsuba_mrt.render(scene)
+    plan = result.auto
+    assert result.mode_used == "full+oidn" and plan.reason.startswith("denoised passes")
     assert result.traced.full == 512 * 512 and result.timings.denoise > 0
+    assert plan.passes and plan.choice.error <= plan.target_error
     truth = mitsuba_mrt.render_reference(scene, spp=128)[0]
-    noisy = mitsuba_mrt.render_reference(scene, spp=2)[0]
-    assert np.mean((result.image - truth) ** 2) < 0.5 * np.mean((noisy - truth) ** 2)
+    full = mitsuba_mrt.render_reference(scene)[0]
+    assert np.mean((result.image - truth) ** 2) < np.mean((full - truth) ** 2)
 
 
 def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
-    def pick(candidates, **_):
-        return Plan(next(c for c in candidates if c.name == "fast+oidn"), "test")
-
-    monkeypatch.setattr(auto, "choose", pick)
-    result = mitsuba_mrt.render(scene, time_limit=1e6)
+    forced(monkeypatch, Candidate("fast+oidn", "mrt", 8, mode="fast", denoise=True))
+    result = mitsuba_mrt.render(scene)
     assert result.mode == "auto" and result.mode_used == "fast"
     assert result.params.denoise == "oidn" and result.timings.denoise > 0
 
 
-def test_a_time_limit_below_the_pilot_gives_the_cheapest_and_says_so(scene):
+def test_a_time_limit_below_a_round_ends_after_the_first(scene):
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
-    assert plan.reason.startswith("nothing fits the time limit")
-    assert plan.budget_s == 0.0 and plan.time_limit == 1e-6
-    assert plan.choice.seconds == min(c.seconds for c in plan.candidates)
+    assert plan.reason == "denoised passes: the time limit" and result.spp == 2
+    assert plan.time_limit == 1e-6 and plan.target_error is None
 
 
-def test_without_oidn_the_plan_has_no_denoising_and_a_note(scene, monkeypatch):
-    monkeypatch.setattr(pilot, "oidn_available", lambda: False)
-    plan = mitsuba_mrt.render(scene, time_limit=1e6).auto
-    assert plan.candidates and not any(c.denoise for c in plan.candidates)
-    assert any("Open Image Denoise is not installed" in note for note in plan.notes)
+def test_a_time_limit_is_filled_with_passes(scene):
+    quick = mitsuba_mrt.render(scene, time_limit=1e-6)
+    longer = mitsuba_mrt.render(scene, time_limit=50 * quick.timings.total)
+    assert longer.spp > quick.spp and longer.spp <= 4 * 8
 
 
-def test_a_noise_threshold_is_met_by_the_choice(scene):
+def test_without_oidn_auto_renders_in_full_or_in_plain_passes(scene, monkeypatch):
+    monkeypatch.setattr(auto, "oidn_available", lambda: False)
+    result = mitsuba_mrt.render(scene)
+    assert result.mode_used == "full" and "no denoiser" in result.auto.reason
+    assert any("Open Image Denoise is not installed" in note for note in result.auto.notes)
+    limited = mitsuba_mrt.render(scene, time_limit=1e-6)
+    assert limited.mode_used == "passes" and limited.timings.denoise == 0
+
+
+def test_a_noise_threshold_is_met_by_the_passes(scene):
     plan = mitsuba_mrt.render(scene, noise_threshold=0.5).auto
-    assert plan.target_error == 0.5 and plan.choice.error <= 0.5
-    cheaper = [c for c in plan.candidates if c.seconds < plan.choice.seconds]
-    assert all(c.error > 0.5 for c in cheaper)
+    assert plan.target_error == 0.5 and plan.choice.error <= 0.5 and plan.choice.spp == 2
 
 
 def test_small_jobs_render_in_full_without_a_pilot(variant):
