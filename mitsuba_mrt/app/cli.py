@@ -112,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="MRT render of a scene, with the full reference")
     r.add_argument("scene", help="Mitsuba XML scene file")
     r.add_argument("-o", "--output", default="out", help="output folder (default %(default)s)")
+    r.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (it shows on a terminal after 2 s)")
     _add_render_options(r)
 
     s = sub.add_parser("batch", help="render every scene x every combination of -D values "
@@ -181,7 +183,7 @@ def _render(args) -> int:
     from .job import RenderJob, run_render_job, summary_line
 
     job = RenderJob(scene=args.scene, out_dir=args.output, defines=dict(args.defines),
-                    **_job_options(args))
+                    progress=not args.no_progress, **_job_options(args))
     summary = run_render_job(job)
     print(json.dumps(summary.as_dict(), indent=2) if args.json else summary_line(summary))
     return 0

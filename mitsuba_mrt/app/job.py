@@ -5,11 +5,14 @@ The command line only parses arguments and calls :func:`run_render_job`.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from ..recon.metrics import error_map, paper_error, psnr
 from ..types import MRTParams, Skips, Timings, TracedCounts
@@ -36,6 +39,7 @@ class RenderJob:
     variant: str = "auto"
     reference: bool = True
     mode: str | None = None
+    progress: bool = False
 
 
 @dataclass
@@ -77,6 +81,31 @@ class RunSummary:
         return asdict(self)
 
 
+#: Seconds a render runs before its progress bar shows.
+PROGRESS_AFTER = 2.0
+
+
+@contextlib.contextmanager
+def progress_bar(enabled: bool):
+    """A ``progress(stage, done)`` callback that draws a tqdm bar on stderr
+    once the work has taken :data:`PROGRESS_AFTER` seconds; nothing where
+    not ``enabled`` or stderr is not a terminal."""
+    if not (enabled and sys.stderr.isatty()):
+        yield lambda stage, done: None
+        return
+    bar = tqdm(total=100, file=sys.stderr, bar_format="{desc} {bar} {percentage:3.0f}%",
+               delay=PROGRESS_AFTER, leave=False)
+
+    def tell(stage: str, done: float) -> None:
+        bar.set_description_str(stage, refresh=False)
+        bar.update(max(0, round(100 * done) - bar.n))
+
+    try:
+        yield tell
+    finally:
+        bar.close()
+
+
 def _why(result) -> str:
     """Why the mode that ran was chosen, in a few words."""
     plan = result.auto
@@ -105,16 +134,20 @@ def run_render_job(job: RenderJob) -> RunSummary:
 
     check_output_folder(job.out_dir)  # before any work
     variant = activate(job.variant)
-    scene = load_scene(job.scene, **job.defines)  # checks the film's size
-    result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode,
-                    **job.param_overrides)
+    with progress_bar(job.progress) as tell:
+        tell("load", 0.0)
+        scene = load_scene(job.scene, **job.defines)  # checks the film's size
+        result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode,
+                        progress=tell, **job.param_overrides)
     stem = Path(job.scene).stem
     height, width = result.ids.shape
     full = result.mode_used == "full"
     reference = None
     if job.reference and not full:
         # at the scene's (or the job's) spp: a plan may trace fewer
-        reference, seconds = render_reference(scene, spp=job.spp, seed=job.seed)
+        with progress_bar(job.progress) as tell:
+            tell("reference", 0.0)
+            reference, seconds = render_reference(scene, spp=job.spp, seed=job.seed)
         # (the reference's alpha is the film's; only RGB is compared and written)
     summary = RunSummary(
         scene=os.fspath(job.scene), variant=variant, width=width, height=height,

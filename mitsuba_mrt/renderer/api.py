@@ -113,7 +113,7 @@ def _check_spp(spp: int | None) -> int | None:
 
 def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0,
            spp: int | None = None, seed: int = 0, params: MRTParams | None = None,
-           mode: str | None = None, **param_overrides) -> MRTResult:
+           mode: str | None = None, progress=None, **param_overrides) -> MRTResult:
     """Render ``scene`` with the MRT: trace the grid, reconstruct the rest.
 
     Parameters
@@ -135,6 +135,9 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         ``noise_threshold`` (see ``mode_used`` and ``auto``); or any key of
         :data:`mitsuba_mrt.modes.MODES` (``paper``, ``fast``, ...).
         Default: the scene's ``mrt`` integrator's mode, else ``auto``.
+    progress : callable, optional
+        Called as ``progress(stage, done)`` when a stage of the render ends
+        (``done`` in [0, 1], the share of the render's work done so far).
     **param_overrides
         Fields of :class:`MRTParams` (``sample_fraction=0.05``,
         ``time_limit=2.0`` ...).
@@ -152,7 +155,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
-            outcome = auto.run_auto(scene, pattern, tracer, params, start)
+            outcome = auto.run_auto(scene, pattern, tracer, params, start, progress=progress)
             plan = outcome.plan
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
@@ -162,19 +165,26 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
             return _full_result(image, alpha, params, choice, plan,
                                 Timings(check=plan.pilot_s, full_render=seconds), start)
         if choice.kind == "denoised":  # the passes again, now without a way out
-            outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False)
+            outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
+                                    progress=progress)
             outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
             return _passes_result(outcome, tracer, params, start)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
-    return _mrt(pattern, tracer, params, mode, plan, start)
+    return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet)
+
+
+def _quiet(stage: str, done: float) -> None:
+    """A ``progress`` that says nothing."""
 
 
 def _mrt(pattern: SamplePattern, tracer: GridTracer, params: MRTParams, mode: str,
-         plan: Plan | None, start: float) -> MRTResult:
+         plan: Plan | None, start: float, progress) -> MRTResult:
     """The MRT's pipeline: trace the grid, denoise, reconstruct, finish."""
     trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
+    progress("trace", 0.5)
     made = mrt_image(tracer.scene, pattern, trace, params, mode, tracer)
+    progress("reconstruct", 1.0)
     recon = made.recon
     alpha = region_values(recon.ids, trace.ids(params.rule_for(mode)), trace.alpha, "mean")
     pattern.put_traced(alpha, trace.alpha)

@@ -70,12 +70,13 @@ def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
 
 
 def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
-             started: float, escape: bool = True) -> AutoOutcome:
+             started: float, escape: bool = True, progress=None) -> AutoOutcome:
     """The plan of the module; the image too where the passes made it.
 
     ``started`` is the render's ``time.perf_counter()`` at its start: a time
     limit is counted from it.  Without ``escape`` the passes run to the
-    target whatever the first round predicts.
+    target whatever the first round predicts.  ``progress(stage, done)``
+    hears of every round of passes.
     """
     spp, limit = tracer.spp, params.time_limit
     width, height = pattern.width, pattern.height
@@ -108,7 +109,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         tracer, width, height, rows, quality=params.denoise_quality,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=spp * (LIMIT_SPP_FACTOR if limit is not None else 1), full_spp=spp, area=area,
-        denoise=denoise, stop_early=stop_early if escape else None)
+        denoise=denoise, stop_early=stop_early if escape else None, on_round=progress)
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,

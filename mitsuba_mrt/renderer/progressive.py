@@ -127,7 +127,7 @@ def relative_error(squared: np.ndarray, reference: np.ndarray) -> float:
 def run_passes(tracer, width: int, height: int, rows: np.ndarray, *, quality: str,
                target_error: float | None, deadline: float | None, max_spp: int,
                full_spp: int, area: float, denoise: bool = True,
-               stop_early=None) -> tuple[np.ndarray, np.ndarray, Progress]:
+               stop_early=None, on_round=None) -> tuple[np.ndarray, np.ndarray, Progress]:
     """Trace passes until the target, the deadline or ``max_spp``; return
     (image (height, width, 3), alpha (height, width), :class:`Progress`).
 
@@ -136,6 +136,7 @@ def run_passes(tracer, width: int, height: int, rows: np.ndarray, *, quality: st
     render's own error at the scene's spp, the default target.  ``deadline``
     is a ``time.perf_counter()`` value.  ``stop_early(progress, pass_s)``,
     called after the first round, may end the passes (return a reason).
+    ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.
     """
     xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
@@ -179,6 +180,8 @@ def run_passes(tracer, width: int, height: int, rows: np.ndarray, *, quality: st
         else:
             progress.predicted = relative_error(variance / passes.count, mean)
         progress.estimate_s += time.perf_counter() - begin
+        if on_round is not None:
+            on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
         target = progress.full_error if target_error is None and deadline is None \
             else target_error
         if target is not None and progress.predicted <= target:

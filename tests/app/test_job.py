@@ -22,3 +22,11 @@ def test_summary_line_leaves_out_the_parts_a_run_did_not_have():
     line = summary_line(summary(Timings(trace=0.5, interpolate=0.1).close(1.0)))
     assert "pilot" not in line and "denoise" not in line and "full render" not in line
     assert "traced 16 grid + 4 at edges = 20.0% of the pixels" in line
+
+
+def test_the_progress_bar_is_silent_off_a_terminal(capsys):
+    from mitsuba_mrt.app.job import progress_bar
+
+    with progress_bar(True) as tell:  # pytest's stderr is no terminal
+        tell("passes (2 spp)", 0.5)
+    assert capsys.readouterr().err == ""

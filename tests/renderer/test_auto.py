@@ -274,3 +274,18 @@ def test_bad_control_values_exit_2_with_one_line(tmp_path, option, value):
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "must be a finite number > 0" in proc.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_progress_hears_of_every_round_of_passes(scene):
+    heard = []
+    result = mitsuba_mrt.render(scene, progress=lambda stage, done: heard.append((stage, done)))
+    assert heard[0] == ("passes (2 spp)", 2 / 8)
+    assert heard[-1][0] == f"passes ({result.spp} spp)"
+    assert [done for _, done in heard] == sorted(done for _, done in heard)
+
+
+def test_progress_hears_of_the_mrt_stages(variant):
+    heard = []
+    mitsuba_mrt.render(mi.load_string(scene_xml(64)), mode="fast",
+                       progress=lambda stage, done: heard.append(stage))
+    assert heard == ["trace", "reconstruct"]
