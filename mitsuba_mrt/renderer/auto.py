@@ -5,17 +5,17 @@
 measure how good the denoised image gets, so the common case spends nothing
 on planning.  Under a time limit the passes fill it.  Without one they go
 on until the estimated error meets ``noise_threshold`` (default: the full
-render's own noise at the scene's spp), unless the first round predicts that
-meeting it in passes costs more than a full render:
-then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the image
-where their grid costs less, and the planner (:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest
-candidate that meets the target.  :func:`plan_without_pilot` is the plan
+render's own noise at the scene's spp), unless a round (the third on)
+predicts that meeting it in passes costs more than a full render:
+then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the
+image where their grid costs less, and the planner
+(:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest candidate that
+meets the target.  :func:`plan_without_pilot` is the plan
 where nothing is worth measuring.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -26,8 +26,8 @@ from ..modes.plan import Candidate, Plan, choose
 from ..recon.denoise import oidn_available
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams
-from .pilot import effective_area, run_pilot, strips_of
-from .progressive import DEFAULT_RATE, Progress, run_passes
+from .pilot import effective_area, run_pilot
+from .progressive import Progress, needed_spp, run_passes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -38,6 +38,9 @@ TIME_MARGIN = 0.9
 #: A pass (1 spp with albedo and normals) costs about this many plain samples:
 #: a full render's cost, predicted from the passes' own.
 PASS_SAMPLES = 2.0
+#: Rounds of passes before their estimates may end them (a noise-free scene's
+#: target of 0 ends them after the first).
+CHECK_AFTER_ROUNDS = 3
 #: Under a time limit the passes may take up to this many times the scene's spp.
 LIMIT_SPP_FACTOR = 4
 
@@ -87,7 +90,6 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
                                 target_error=params.noise_threshold, notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
-    rows = np.concatenate([np.arange(s.top, s.top + s.height) for s in strips_of(pattern)])
     deadline = None if limit is None else started + TIME_MARGIN * limit
     costs = {}
 
@@ -96,17 +98,18 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         if deadline is not None or not denoise:
             return None
         target = params.noise_threshold or progress.full_error
-        half, error = progress.history[-1]
-        needed = half * (error / target) ** (1 / DEFAULT_RATE) if target > 0 else math.inf
-        costs.update(passes=needed * pass_s, full=spp * pass_s / PASS_SAMPLES,
-                     mrt=params.sample_fraction * spp * pass_s, passes_spp=needed,
-                     target=target, full_error=progress.full_error)
+        if target > 0 and len(progress.history) < CHECK_AFTER_ROUNDS:
+            return None  # too few rounds to tell how fast the error falls
+        needed = needed_spp(progress.history, target)  # the spp of the final image
+        costs.update(passes=max(needed - progress.spp, 0.0) * pass_s,
+                     full=spp * pass_s / PASS_SAMPLES, mrt=params.sample_fraction * spp * pass_s,
+                     passes_spp=needed, target=target, full_error=progress.full_error)
         if costs["passes"] <= costs["full"]:
             return None
-        return "passes would cost more than a full render"
+        return "more passes would cost more than a full render"
 
     image, alpha, progress = run_passes(
-        tracer, width, height, rows, quality=params.denoise_quality,
+        tracer, width, height, quality=params.denoise_quality,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=spp * (LIMIT_SPP_FACTOR if limit is not None else 1), full_spp=spp, area=area,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=progress)

@@ -1,7 +1,8 @@
 """A full render in passes, denoised: a time limit and a noise threshold for Mitsuba's JIT variants.
 
-Every pass traces each pixel once more (1 spp, a box pixel filter, the
-albedo and shading normal of the same samples as OIDN's guides), and the
+Every pass traces each pixel once more (1 spp, a box pixel filter; the
+first :data:`GUIDE_PASSES` also the albedo and shading normal of the same
+samples, OIDN's guides), and the
 passes go on in rounds that double their number until the denoised image's
 estimated error meets the target, the next round would overrun the time
 left, or the spp reach the cap; then the mean of the passes goes through
@@ -12,8 +13,8 @@ the even passes is denoised and compared with the mean of the odd ones,
 which are independent of it; their difference, less the odd mean's own
 noise (the passes' per-pixel variance over ``k / 2``), estimates the squared
 error of the image denoised from ``k / 2`` passes, and the last two rounds
-say how fast it falls (:func:`predict`).  It is measured on a few strips of
-rows (``rows``), so that it costs a fraction of an OIDN call.
+say how fast it falls (:func:`predict`).  It is measured on a quarter of the
+rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 """
 
 from __future__ import annotations
@@ -27,20 +28,36 @@ import numpy as np
 from ..recon.denoise import denoise_image
 from ..types import SeedStream
 
-#: 1-spp copies of every pixel one trace takes at most (memory: lanes).
-MAX_COPIES = 8
 #: Passes of the first round (the fewest that give a variance and two halves).
 FIRST_ROUND = 2
 #: How fast a denoised image's error falls with the spp, ``spp ** -rate``,
 #: until two rounds have measured it; and the range a measured rate is held in.
 DEFAULT_RATE, RATE_RANGE = 0.5, (0.2, 1.0)
+#: Passes that also trace the albedo and normals, OIDN's guides (they cost
+#: about half a sample more each, and the guides converge long before the colour).
+GUIDE_PASSES = 4
+#: Strips of rows the error is estimated on (a quarter of the image's rows).
+ESTIMATE_STRIPS = 4
+#: Each pass's radiance is clipped at this for the estimates (a display shows
+#: up to 1): a bright sample's excess is noise the estimates cannot average out.
+ESTIMATE_CLIP = 4.0
 
 
 @dataclass
 class Passes:
-    """Running sums of the passes so far, per pixel (flat, ``(n, 3)``)."""
+    """Running sums of the passes so far, per pixel (flat, ``(n, 3)``).
 
+    The image is the sum over every pixel (``total``); the estimates read
+    sums over the pixels of ``crop`` alone, each pass's values clipped at
+    :data:`ESTIMATE_CLIP` first, so that a rare bright sample (a caustic's
+    firefly) does not swamp what the other pixels say: ``even`` and ``odd``
+    (the two halves), ``square`` (for the variance).
+    """
+
+    crop: np.ndarray
     count: int = 0
+    guides: int = 0
+    total: np.ndarray | None = None
     even: np.ndarray | None = None
     odd: np.ndarray | None = None
     square: np.ndarray | None = None
@@ -50,26 +67,35 @@ class Passes:
 
     def add(self, radiance, albedo, normal, alpha) -> None:
         if self.count == 0:
-            zero = np.zeros_like(radiance)
+            self.total = np.zeros_like(radiance)
+            zero = np.zeros((len(self.crop), 3))
             self.even, self.odd, self.square = zero.copy(), zero.copy(), zero.copy()
-            self.albedo, self.normal = np.zeros_like(albedo), np.zeros_like(normal)
+            self.albedo, self.normal = np.zeros_like(radiance), np.zeros_like(radiance)
             self.alpha = np.zeros(len(radiance))
-        (self.even if self.count % 2 == 0 else self.odd)[...] += radiance
-        self.square += radiance ** 2
-        self.albedo += albedo
-        self.normal += normal
+        self.total += radiance
+        clipped = np.minimum(radiance[self.crop], ESTIMATE_CLIP)
+        (self.even if self.count % 2 == 0 else self.odd)[...] += clipped
+        self.square += clipped ** 2
+        if albedo is not None:
+            self.albedo += albedo
+            self.normal += normal
+            self.guides += 1
         if alpha is not None:
             self.alpha += alpha
         self.count += 1
 
     @property
     def mean(self) -> np.ndarray:
-        return (self.even + self.odd) / self.count
+        return self.total / self.count
+
+    def guide(self, index=slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(albedo, normal): the means of the passes that traced them."""
+        return self.albedo[index] / self.guides, self.normal[index] / self.guides
 
     @property
     def variance(self) -> np.ndarray:
-        """A single pass's variance per pixel and channel (unbiased)."""
-        mean = self.mean
+        """A single pass's variance per pixel of ``crop`` and channel (unbiased)."""
+        mean = (self.even + self.odd) / self.count
         return np.maximum(self.square / self.count - mean ** 2, 0.0) * (
             self.count / max(self.count - 1, 1))
 
@@ -93,9 +119,30 @@ class Progress:
     stopped: str = ""
 
 
+def rate_of(history: list) -> float:
+    """How fast the error falls with the spp, ``spp ** -rate``: the slope of
+    a line through ``history``'s positive points in log-log (all of them, so
+    that one noisy round moves it little), held in :data:`RATE_RANGE`;
+    :data:`DEFAULT_RATE` until two points have been measured.
+
+    Examples
+    --------
+    >>> round(rate_of([(1, 0.4), (2, 0.2), (4, 0.1)]), 6)
+    1.0
+    >>> rate_of([(1, 0.4)])
+    0.5
+    """
+    points = [(math.log(s), math.log(e)) for s, e in history if e > 0]
+    if len(points) < 2:
+        return DEFAULT_RATE
+    x, y = np.array(points).T
+    slope = float(np.polyfit(x, y, 1)[0])
+    return min(max(-slope, RATE_RANGE[0]), RATE_RANGE[1])
+
+
 def predict(history: list, spp: int) -> float:
-    """The denoised error at ``spp`` from ``history`` [(spp, error), ...] (the
-    last two give the rate, else :data:`DEFAULT_RATE`).
+    """The denoised error at ``spp``, from the last of ``history``
+    [(spp, error), ...] at :func:`rate_of`'s rate.
 
     Examples
     --------
@@ -105,18 +152,45 @@ def predict(history: list, spp: int) -> float:
     0.2
     """
     (s1, e1) = history[-1]
-    rate = DEFAULT_RATE
-    if len(history) >= 2 and history[-2][1] > 0 and e1 > 0:
-        (s0, e0) = history[-2]
-        rate = math.log(e0 / e1) / math.log(s1 / s0)
-        rate = min(max(rate, RATE_RANGE[0]), RATE_RANGE[1])
-    return e1 * (spp / s1) ** -rate
+    return e1 * (spp / s1) ** -rate_of(history)
+
+
+def needed_spp(history: list, target: float) -> float:
+    """The spp at which :func:`predict` meets ``target`` (inf for a target of 0).
+
+    Examples
+    --------
+    >>> needed_spp([(1, 0.4), (2, 0.2)], 0.1)
+    4.0
+    """
+    if target <= 0:
+        return math.inf
+    (s1, e1) = history[-1]
+    if e1 <= target:
+        return float(s1)
+    return s1 * (e1 / target) ** (1.0 / rate_of(history))
+
+
+def estimate_rows(height: int) -> np.ndarray:
+    """The rows the error is estimated on: :data:`ESTIMATE_STRIPS` strips
+    spread down the image, each of ``max(16, height / 16)`` rows (all rows
+    of a small image)."""
+    rows_each = max(16, height // 16)
+    if ESTIMATE_STRIPS * rows_each >= height:
+        return np.arange(height)
+    starts = [round((k + 0.5) * height / ESTIMATE_STRIPS - rows_each / 2)
+              for k in range(ESTIMATE_STRIPS)]
+    return np.concatenate([np.arange(s, s + rows_each) for s in starts])
 
 
 def relative_error(squared: np.ndarray, reference: np.ndarray) -> float:
     """Root of the mean of ``squared`` (n, 3) over the pixels a display shows
     unclipped (``reference`` below 1), over the mean square of ``reference``
-    there: the planner's relative RMS error."""
+    there: the planner's relative RMS error.
+
+    ``reference`` should be free of fireflies (a denoised image): a noisy
+    one leaves its noisiest pixels out, and the noise with them.
+    """
     shown = (reference <= 1.0).all(axis=1)
     if not shown.any():
         return 0.0
@@ -124,61 +198,57 @@ def relative_error(squared: np.ndarray, reference: np.ndarray) -> float:
     return float(np.sqrt(max(float(np.mean(squared[shown])), 0.0) / power))
 
 
-def run_passes(tracer, width: int, height: int, rows: np.ndarray, *, quality: str,
+def run_passes(tracer, width: int, height: int, *, quality: str,
                target_error: float | None, deadline: float | None, max_spp: int,
                full_spp: int, area: float, denoise: bool = True,
                stop_early=None, on_round=None) -> tuple[np.ndarray, np.ndarray, Progress]:
     """Trace passes until the target, the deadline or ``max_spp``; return
     (image (height, width, 3), alpha (height, width), :class:`Progress`).
 
-    ``rows`` are the image rows the error is estimated on; ``full_spp`` and
+    The error is estimated on :func:`estimate_rows`; ``full_spp`` and
     ``area`` (:func:`mitsuba_mrt.renderer.pilot.effective_area`) give a full
     render's own error at the scene's spp, the default target.  ``deadline``
     is a ``time.perf_counter()`` value.  ``stop_early(progress, pass_s)``,
-    called after the first round, may end the passes (return a reason).
+    called after every round, may end the passes (return a reason).
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.
     """
     xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     n = len(xy)
+    rows = estimate_rows(height)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     one = replace(tracer, spp=1)
-    passes, progress, launch = Passes(), Progress(), 0
+    passes, progress = Passes(crop), Progress()
     round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
     while True:
         begin = time.perf_counter()
-        done = 0
-        while done < round_size:
-            copies = max(2, min(MAX_COPIES, round_size - done))
-            trace = one(np.tile(xy, (copies, 1)), stream=SeedStream.LADDER + launch,
-                        aovs=True, ids=False, box=True, replay=True)
-            launch += 1
-            for k in range(copies):
-                part = slice(k * n, (k + 1) * n)
-                passes.add(trace.radiance[part], trace.albedo[part], trace.normal[part],
-                           None if trace.alpha is None else trace.alpha[part])
-            done += copies
+        for _ in range(round_size):  # recorded once, replayed with new seeds
+            guides = passes.count < GUIDE_PASSES
+            trace = one(xy, stream=SeedStream.LADDER + passes.count, aovs=guides, ids=False,
+                        box=True, replay=True)
+            passes.add(trace.radiance, trace.albedo if guides else None,
+                       trace.normal if guides else None, trace.alpha)
         spent = time.perf_counter() - begin
         progress.trace_s += spent
-        pass_s = spent / done
+        pass_s = spent / round_size
         progress.spp = passes.count
         begin = time.perf_counter()
-        mean = passes.mean[crop]
-        variance = passes.variance[crop]
-        progress.full_error = relative_error(variance / (full_spp * area), mean)
+        variance = passes.variance
         if denoise:
             half = passes.count // 2
             shape = (len(rows), width, 3)
-            denoised = denoise_image((passes.even[crop] / half).reshape(shape),
-                                     (passes.albedo[crop] / passes.count).reshape(shape),
-                                     (passes.normal[crop] / passes.count).reshape(shape),
-                                     quality=quality).reshape(-1, 3)
+            albedo, normal = passes.guide(crop)
+            denoised = denoise_image((passes.even / half).reshape(shape), albedo.reshape(shape),
+                                     normal.reshape(shape), quality=quality).reshape(-1, 3)
             oidn_px = (time.perf_counter() - begin) / len(crop)
-            squared = (np.clip(denoised, 0.0, 1.0) - passes.odd[crop] / half) ** 2 - variance / half
-            progress.history.append((half, relative_error(squared, mean)))
+            squared = (np.clip(denoised, 0.0, 1.0) - passes.odd / half) ** 2 - variance / half
+            progress.history.append((half, relative_error(squared, denoised)))
             progress.predicted = predict(progress.history, passes.count)
+            progress.full_error = relative_error(variance / (full_spp * area), denoised)
         else:
+            mean = (passes.even + passes.odd) / passes.count
             progress.predicted = relative_error(variance / passes.count, mean)
+            progress.full_error = relative_error(variance / (full_spp * area), mean)
         progress.estimate_s += time.perf_counter() - begin
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
@@ -187,7 +257,7 @@ def run_passes(tracer, width: int, height: int, rows: np.ndarray, *, quality: st
         if target is not None and progress.predicted <= target:
             progress.stopped = "met the target"
             break
-        if len(progress.history) <= 1 and stop_early is not None:
+        if stop_early is not None:
             reason = stop_early(progress, pass_s)
             if reason:
                 progress.stopped = reason
@@ -204,10 +274,9 @@ def run_passes(tracer, width: int, height: int, rows: np.ndarray, *, quality: st
     image = passes.mean
     if denoise:
         begin = time.perf_counter()
-        image = denoise_image(image.reshape(height, width, 3),
-                              (passes.albedo / passes.count).reshape(height, width, 3),
-                              (passes.normal / passes.count).reshape(height, width, 3),
-                              quality=quality).reshape(-1, 3)
+        albedo, normal = passes.guide()
+        image = denoise_image(image.reshape(height, width, 3), albedo.reshape(height, width, 3),
+                              normal.reshape(height, width, 3), quality=quality).reshape(-1, 3)
         progress.denoise_s = time.perf_counter() - begin
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)
