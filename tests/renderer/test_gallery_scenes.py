@@ -71,7 +71,8 @@ def test_instances_are_regions_of_their_own():
     # which the scene does not list: it used to count as no shape at all, so
     # every instance merged with the background and was not demodulated
     import mitsuba_mrt
-    from mitsuba_mrt.renderer.trace import ordered_shapes, trace_pixels
+    from mitsuba_mrt.renderer.scene_query import ordered_shapes
+    from mitsuba_mrt.renderer.trace import trace_pixels
 
     scene = mitsuba_mrt.load_scene(GALLERY / "instanced.xml", res=32, spp=1)
     instances = {k + 1 for k, s in enumerate(ordered_shapes(scene))
