@@ -10,6 +10,8 @@ lane of one Dr.Jit wavefront; the scalar variant loops in Python.
 
 from __future__ import annotations
 
+import itertools
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -17,7 +19,7 @@ import numpy as np
 from .develop import MIRROR_DEPTH, _aligned_float, _camera_ray
 from .lanes import _to_numpy, is_jit, logical_not
 from .replay import Replay
-from .scene_query import has_mirrors
+from .scene_query import _inner_lookup, has_mirrors
 
 def _is_mirror(bsdf, valid):
     flags = bsdf.flags()
@@ -120,26 +122,24 @@ def _path_ids(shape_index: np.ndarray, steps: list, num_shapes: int) -> np.ndarr
     return path
 
 
-#: Shapes inside shape groups, by address: a number each, given on first
-#: sight (the scene does not list them, so they have no index of their own).
-_inner_shapes: dict = {}
-
-
-def _with_inner_shapes(path: np.ndarray, inner: np.ndarray) -> np.ndarray:
+def _with_inner_shapes(path: np.ndarray, inner: np.ndarray, scene) -> np.ndarray:
     """``path`` ids told apart by the shape inside an instance's group.
 
     An instance is one listed shape, but its group may hold several (a cup
     and the ball in it): where ``inner`` (the address of the shape hit inside
     the group, 0 elsewhere) is set, its number is folded into the path id
-    (:func:`_fold`, as :func:`_path_ids` folds long chains).  Numbers
-    stay fixed for the process, so ids agree between the traces of a render.
+    (:func:`_fold`, as :func:`_path_ids` folds long chains).  The numbers
+    are the scene's own (:func:`.scene_query._inner_lookup`), so ids agree
+    between the traces of a render and between loads of a scene.
     """
     hit = inner != 0
     if not hit.any():
         return path
     addresses, which = np.unique(inner[hit], return_inverse=True)
-    numbers = np.array([_inner_shapes.setdefault(int(a), len(_inner_shapes) + 1)
-                        for a in addresses], dtype=np.int64)
+    lookup = _inner_lookup(scene)
+    unlisted = itertools.count(len(lookup) + 1)  # none expected: numbered after the rest
+    numbers = np.array([lookup.get(int(a)) or next(unlisted) for a in addresses],
+                       dtype=np.int64)
     out = path.copy()
     out[hit] = _fold(path[hit], numbers[which])
     return out
@@ -185,7 +185,7 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
                       np.where((index := to_index(ptr)) > 0, index, len(keys) + 1), 0)
              for bounced, ptr in chain]
     path = _with_inner_shapes(_path_ids(shape_index, steps, len(keys)),
-                              _to_numpy(inner, n).astype(np.int64))
+                              _to_numpy(inner, n).astype(np.int64), scene)
     path = _with_side(path, _to_numpy(back, n).astype(bool))
     return shape_index, _to_numpy(mask, n).astype(np.uint32), path, _to_numpy(normal, n)
 
@@ -229,8 +229,8 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
             back[k] = float(dr.dot(si.sh_frame.n, ray.d)) > 0.0
             for b, (_, shape) in enumerate(chain):
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
-    path = _with_side(_with_inner_shapes(_path_ids(shape_index, steps, len(lookup)), inner),
-                      back)
+    path = _with_side(_with_inner_shapes(_path_ids(shape_index, steps, len(lookup)), inner,
+                                         scene), back)
     return shape_index, visible, path, normal
 
 

@@ -192,8 +192,32 @@ def _shape_lookup(scene: mi.Scene):
     """Map from Dr.Jit shape pointers (JIT) or shape objects (scalar) to 1-based indices."""
     shapes = ordered_shapes(scene)
     if is_jit():
-        keys = np.array([int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0])
-                         for s in shapes], dtype=np.int64)
+        keys = np.array([_jit_pointer(s) for s in shapes], dtype=np.int64)
         order = np.argsort(keys)
         return keys[order], order + 1
     return {id(s): k + 1 for k, s in enumerate(shapes)}
+
+
+def _jit_pointer(shape) -> int:
+    """``shape``'s Dr.Jit pointer (as ``UInt32``), as a JIT trace reports the shape it hit."""
+    return int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
+
+
+def _inner_lookup(scene: mi.Scene) -> dict[int, int]:
+    """Map from the shapes inside the scene's shape groups to a number each, 1-based.
+
+    The scene does not list these shapes, so they have no index of their
+    own.  They are numbered as :func:`ordered_shapes` numbers the listed
+    ones, by the natural order of their ids, ties in the order
+    :func:`_shape_groups` finds them (group by group, then within a
+    group): by what the scene is, not by where its objects live, so each
+    load of a scene gives them the same numbers.  Keys are what the id
+    trace reports for a hit inside a group: the Dr.Jit pointer (JIT) or
+    the address of the C++ object (scalar).
+    """
+    inner = [shape for _, members in _shape_groups(scene) for shape in members]
+    inner = sorted(inner, key=lambda shape: _natural_key(shape.id()))  # stable: ties keep order
+    numbers: dict[int, int] = {}
+    for shape in inner:
+        numbers.setdefault(_jit_pointer(shape) if is_jit() else shape.ptr, len(numbers) + 1)
+    return numbers
