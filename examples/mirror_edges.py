@@ -13,7 +13,7 @@ import argparse
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import edge_mask, error_map
-from mitsuba_mrt.renderer.trace import ordered_shapes
+from mitsuba_mrt.renderer.scene_query import ordered_shapes
 
 
 def main():

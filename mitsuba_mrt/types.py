@@ -167,7 +167,7 @@ class SparseTrace:
         noise is about ``sqrt(variance / spp)``.
     curved_mirror : ndarray of bool, shape (n,), optional
         True where the pixel-centre ray first hits a curved mirror (see
-        :func:`mitsuba_mrt.renderer.trace.curved_mirror_indices`); None when the
+        :func:`mitsuba_mrt.renderer.scene_query.curved_mirror_indices`); None when the
         scene has none.
     """
 

@@ -68,6 +68,12 @@ def oidn_available() -> bool:
     return True
 
 
+def release() -> None:
+    """Let go of the OIDN device and filters; the next call creates them anew."""
+    with _lock:
+        _state.clear()
+
+
 def _check(device, what: str) -> None:
     error = device.get_error()
     if error:

@@ -27,9 +27,10 @@ from ..recon.sampling import SamplePattern, grid_pattern
 from ..types import (MRTParams, SeedStream, Skips, SparseTrace, Timings, TracedCounts,
                      check_radiance)
 from . import auto
+from .lanes import is_jit
 from .pipeline import mrt_image
 from .scene import resolve_sensor, unwrap
-from .trace import is_jit, trace_pixels
+from .trace import trace_pixels
 
 
 @dataclass

@@ -19,7 +19,7 @@ from ..modes import OUTPUT_DENOISED_MODES, reconstruct
 from ..recon.denoise import denoise_grid, denoise_image, textured_pixels
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer
-from .trace import diffuse_shapes
+from .scene_query import diffuse_shapes
 
 
 @dataclass

@@ -11,7 +11,8 @@ import numpy as np
 from ..errors import MRTError
 from ..types import MRTParams
 from .aovs import AOV_NAMES, aov_images
-from .trace import has_mirrors, is_jit, logical_not
+from .lanes import is_jit, logical_not
+from .scene_query import has_mirrors
 
 #: The variant whose classes this module defines (it is reloaded on a switch).
 VARIANT = mi.variant()

@@ -88,6 +88,16 @@ def active() -> bool:
     return _replaying[-1]
 
 
+def clear_recordings() -> None:
+    """Drop every :class:`Replay`'s recordings, the layouts it could not record,
+    and the objects held for their tokens: later traces are recorded anew, and
+    :func:`recordings` counts from zero again.  Tokens are not given again."""
+    for replay in _instances:
+        replay.frozen.clear()
+        replay._failed.clear()
+    _held.clear()
+
+
 #: Sizes a padded pixel set is rounded up to: a geometric series of this
 #: ratio (at most 19 % of the traced pixels are padding).
 PAD_RATIO = 2.0 ** 0.25

@@ -39,7 +39,7 @@ def test_a_mirror_reflecting_two_spheres_yields_two_regions(variant):
 
 
 def test_refinement_resolves_reflected_edges(variant):
-    from mitsuba_mrt.renderer.trace import ordered_shapes
+    from mitsuba_mrt.renderer.scene_query import ordered_shapes
 
     res = 200
     scene = mitsuba_mrt.load_scene("scenes_xml/paper_fig1_conductor.xml", res=res)
@@ -70,7 +70,7 @@ def _in_a_group(shape_xml: str, group: str, instances: list[str]) -> str:
 
 
 def test_a_mirror_inside_a_shape_group_is_followed(variant):
-    from mitsuba_mrt.renderer.trace import ordered_shapes
+    from mitsuba_mrt.renderer.scene_query import ordered_shapes
 
     # an instance's own BSDF is a default diffuse: the mirror in its group
     # was not seen, the id pass did not follow it, and both reflections
@@ -89,8 +89,8 @@ def test_a_mirror_inside_a_shape_group_is_followed(variant):
 
 
 def test_instances_show_their_own_groups_bsdfs(variant):
-    from mitsuba_mrt.renderer.trace import (_shape_groups, curved_mirror_indices, diffuse_shapes,
-                                            has_mirrors, ordered_shapes)
+    from mitsuba_mrt.renderer.scene_query import (_shape_groups, curved_mirror_indices,
+                                                  diffuse_shapes, has_mirrors, ordered_shapes)
 
     matte = ('<shape type="sphere" id="m"><float name="radius" value="0.5"/>'
              '<bsdf type="diffuse"/></shape>')

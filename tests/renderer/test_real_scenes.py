@@ -232,7 +232,7 @@ def test_denoising_a_dark_texture_does_not_magnify_its_error(variant):
     # the grid sees the checker as a pattern finer than OIDN keeps: the floor, a
     # textured diffuse surface, is denoised as shading and multiplied back
     pytest.importorskip("pyoidn")
-    from mitsuba_mrt.renderer.trace import diffuse_shapes
+    from mitsuba_mrt.renderer.scene_query import diffuse_shapes
 
     scene = mi.load_string(dark_checker_scene(spp=8))
     assert diffuse_shapes(scene).tolist()[0] is False and diffuse_shapes(scene)[1:].all()
@@ -278,7 +278,7 @@ def test_one_sample_per_pixel_has_no_variance_and_no_smoothing(variant):
 
 
 def test_every_pixel_is_recognised_in_any_order_and_only_once():
-    from mitsuba_mrt.renderer.trace import _every_pixel
+    from mitsuba_mrt.renderer.develop import _every_pixel
 
     xy = np.stack(np.meshgrid(np.arange(5), np.arange(4)), -1).reshape(-1, 2)
     assert _every_pixel(xy, 5, 4) and _every_pixel(xy[::-1], 5, 4)

@@ -7,7 +7,8 @@ import pytest
 import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
 from mitsuba_mrt.renderer.replay import padded_size, recordings
-from mitsuba_mrt.renderer.trace import is_jit, trace_pixels
+from mitsuba_mrt.renderer.lanes import is_jit
+from mitsuba_mrt.renderer.trace import trace_pixels
 from helpers import small_scene_xml
 
 pytestmark = pytest.mark.skipif(not is_jit(), reason="only JIT variants replay kernels")
@@ -78,17 +79,17 @@ def test_renders_replay_the_grid():
 
 
 def test_replaying_false_traces_anew():
-    from mitsuba_mrt.renderer import trace
+    from mitsuba_mrt.renderer import develop
     from mitsuba_mrt.renderer.replay import replaying
 
     scene = mi.load_string(PATH_SCENE)
     xy = grid_pattern(24, 24, 0.3).pixel_xy
-    before = trace._DEVELOP.frozen.n_recordings
+    before = develop._DEVELOP.frozen.n_recordings
     with replaying(False):
         _trace(scene, scene.integrator(), xy, True)
-    assert trace._DEVELOP.frozen.n_recordings == before
+    assert develop._DEVELOP.frozen.n_recordings == before
     _trace(scene, scene.integrator(), xy, True)
-    assert trace._DEVELOP.frozen.n_recordings == before + 1
+    assert develop._DEVELOP.frozen.n_recordings == before + 1
 
 
 def test_each_layout_is_recorded_once():

@@ -1,0 +1,343 @@
+"""Tracing and developing the samples of traced pixels (Mitsuba-specific).
+
+A traced pixel is what ``mi.render`` gives at that pixel: its samples
+follow the film's reconstruction filter (:mod:`.pixel_filter`) and are
+developed as Mitsuba's own image block does, spectra converted to the RGB
+that ``mi.render`` writes, alpha included.  In a JIT variant (LLVM, CUDA)
+every sample of every traced pixel is one lane of a single Dr.Jit
+wavefront; the scalar variant loops over the samples in Python.
+
+Each sample also gives the albedo of its first hit, the directional albedo
+of the BSDF for the view direction (the mean weight of a BSDF sample),
+averaged like the radiance: what multiplies the incoming light, bounded by
+one; and the shading normal there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .lanes import is_jit, logical_not
+from .pixel_filter import filter_table
+from .replay import Replay
+
+#: Specular (mirror) bounces followed: by a sample's albedo (:func:`_albedo_along`)
+#: and by the id trace (:mod:`.ids`).
+MIRROR_DEPTH = 4
+
+#: A pixel's sample variance below this share of its samples' mean square is
+#: taken as 0: the sums are float32, so their difference rounds to ~1e-7 of it.
+VARIANCE_FLOOR = 1e-6
+
+#: Channels of the image block the samples are developed in: weighted RGB,
+#: alpha, the weight, RGB squared (for the variance), albedo and its weight,
+#: the count of samples whose radiance was NaN or Inf, and the shading normal
+#: (weighted as the albedo).
+_CHANNELS = 16
+
+
+@dataclass
+class _Developed:
+    """Per traced pixel, what its samples gave (numpy)."""
+
+    radiance: np.ndarray  # (n, 3) the developed RGB
+    alpha: np.ndarray     # (n,)
+    variance: np.ndarray  # (n, 3) of a single sample's RGB about the pixel's mean
+    albedo: np.ndarray    # (n, 3)
+    normal: np.ndarray | None = None  # (n, 3) the samples' mean shading normal
+
+
+def _camera_ray(sensor, sampler, position, spp: int, centre: bool = False):
+    """A camera ray through ``position`` (crop-relative pixel coordinates).
+
+    ``centre`` rays use no random numbers: no aperture, time or wavelength
+    sample.
+    """
+    film_size = mi.ScalarVector2f(sensor.film().crop_size())
+    aperture = sampler.next_2d() if (sensor.needs_aperture_sample() and not centre) \
+        else mi.Point2f(0.5, 0.5)
+    ray_time = sensor.shutter_open()
+    if sensor.shutter_open_time() > 0 and not centre:
+        ray_time += sampler.next_1d() * sensor.shutter_open_time()
+    wavelength = sampler.next_1d() if (mi.is_spectral and not centre) else 0.0
+    ray, weight = sensor.sample_ray_differential(ray_time, wavelength, position / film_size,
+                                                 aperture)
+    ray.scale_differential(dr.rsqrt(float(spp)))
+    return ray, weight
+
+
+def _rgb(value, wavelengths, active=True):
+    """A sample's value as the RGB that ``mi.render`` develops (spectra converted)."""
+    if mi.is_polarized:
+        value = mi.unpolarized_spectrum(value)
+    if mi.is_spectral:
+        return mi.spectrum_to_srgb(value, wavelengths, active)
+    return mi.Color3f(value)
+
+
+def _albedo_along(scene, sampler, ray, active):
+    """What multiplies the light arriving at the first hit: its BSDF's albedo
+    for the view direction, one BSDF sample's weight, clamped to [0, 1] (RGB);
+    with whether the camera ray hit and the shading normal at its hit.
+
+    Through mirrors and glass (delta BSDFs) the path is followed, up to
+    ``MIRROR_DEPTH`` bounces, and the albedo is that of the surface seen
+    times the specular throughput; 0 on a miss.  The mean over a pixel's
+    samples estimates the pixel's albedo the way its radiance is estimated.
+    """
+    albedo = mi.Color3f(0.0)
+    throughput = mi.Color3f(1.0)
+    ray = mi.Ray3f(ray)
+    active = mi.Bool(active) if is_jit() else bool(active)
+    hit, normal = None, None
+    for depth in range(MIRROR_DEPTH + 1):
+        si = scene.ray_intersect(ray, active)
+        valid = active & si.is_valid() if is_jit() else bool(active and si.is_valid())
+        if depth == 0:
+            hit = valid
+            normal = dr.select(valid, si.sh_frame.n, 0.0) if is_jit() else (
+                si.sh_frame.n if valid else mi.Vector3f(0.0))
+        if not (is_jit() or valid):
+            break
+        bsdf = si.bsdf(ray)
+        bs, weight = bsdf.sample(mi.BSDFContext(), si, sampler.next_1d(valid),
+                                 sampler.next_2d(valid), valid)
+        weight = dr.clip(_rgb(weight, si.wavelengths, valid), 0.0, 1.0)
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        done = valid & (bs.pdf > 0.0) & (logical_not(delta) if depth < MIRROR_DEPTH else True)
+        albedo = dr.select(done, throughput * weight, albedo)
+        if not is_jit() and done:
+            break
+        active = valid & (bs.pdf > 0.0) & logical_not(done)
+        throughput = throughput * weight
+        ray = si.spawn_ray(si.to_world(bs.wo))
+    return albedo, hit, normal
+
+
+def _read_sums(sums: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
+    """The developed values of the traced pixels from their filter-weighted sums."""
+    def reciprocal(weight):  # 0 where nothing was accumulated
+        out = np.zeros_like(weight)
+        np.divide(1.0, weight, out=out, where=weight != 0.0)
+        return out
+
+    per_weight = reciprocal(sums[:, 4])[:, None]
+    radiance = sums[:, 0:3] * per_weight
+    second = sums[:, 5:8] * per_weight
+    per_albedo_weight = reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
+    albedo = sums[:, 8:11] * per_albedo_weight
+    radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
+    variance = second - radiance ** 2
+    # below this it is the float32 sums' rounding (a single sample's is all rounding)
+    variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
+    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance,
+                      np.clip(albedo, 0.0, 1.0),
+                      np.clip(sums[:, 13:16] * per_albedo_weight, -1.0, 1.0))
+
+
+def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
+    """Whether ``pixel_xy`` is every pixel of the image, each once."""
+    count = width * height
+    if len(pixel_xy) != count:
+        return False
+    x, y = pixel_xy[:, 0], pixel_xy[:, 1]
+    if x.min() < 0 or y.min() < 0 or x.max() >= width or y.max() >= height:
+        return False
+    # a counting pass, not a sort: the id pass asks this of every pixel
+    return bool((np.bincount(y * width + x, minlength=count) == 1).all())
+
+
+#: Bytes to which the arrays given to a recorded trace are aligned (a cache line,
+#: and the widest SIMD register).
+ALIGNMENT = 64
+
+
+def _aligned_float(values: np.ndarray):
+    """``values`` as a Dr.Jit ``Float`` over a float32 copy aligned to :data:`ALIGNMENT`.
+
+    Dr.Jit maps a NumPy array's memory instead of copying it, and a frozen
+    call (:mod:`.replay`) is recorded anew whenever an input's memory turns
+    from aligned to unaligned or back: NumPy's buffers are aligned or not by
+    chance, so the same trace was recorded again on some renders.
+    """
+    values = np.asarray(values, dtype=np.float32).ravel()
+    slack = ALIGNMENT // values.itemsize
+    buffer = np.empty(len(values) + slack, dtype=np.float32)
+    start = (-buffer.ctypes.data % ALIGNMENT) // values.itemsize
+    out = buffer[start:start + len(values)]
+    out[...] = values
+    return mi.Float(out)
+
+
+def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
+                 box=False):
+    """Trace ``spp`` samples of every pixel in one wavefront and develop them.
+
+    Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
+    splatted with the filter).  Some pixels: each from its own samples, placed
+    with the filter's distribution (:mod:`.pixel_filter`).  ``sampler`` is
+    :func:`_develop_scalar`'s; the kernels clone the sensor's own.
+    """
+    film = sensor.film()
+    width, height = (int(v) for v in film.crop_size())
+    table = filter_table(box_filter() if box else film.rfilter())
+    n = len(pixel_xy)
+    every = _every_pixel(pixel_xy, width, height)
+    # what the kernels bake in, so that a recording is replayed only where it holds
+    layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
+              tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
+              float(table.radius), len(table.pdf), bool(box))
+    sums = _DEVELOP(scene, sensor, integrator, _aligned_float(pixel_xy[:, 0]),
+                    _aligned_float(pixel_xy[:, 1]), _aligned_float(table.cdf),
+                    dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), layout,
+                    objects=(scene, sensor, integrator), record=replay)
+    if every:
+        sums = sums.numpy().astype(np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+    else:
+        sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
+                         for total in sums], axis=1)  # (literal zeros broadcast)
+    return _read_sums(sums, pixel_xy)
+
+
+def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layout):
+    """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
+    per pixel (a list of channels) or, for every pixel, as an image block's
+    tensor.  Everything they depend on is an argument (``layout`` the Python
+    values), so that :func:`drjit.freeze` can record and replay them.
+
+    The sampler is made here, not passed: a frozen function's inputs are
+    also its outputs, and the sampler's state after the samples would cost
+    a second kernel over every lane to write back.
+    """
+    (n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells,
+     box) = layout
+    film = sensor.film()
+    rfilter = box_filter() if box else film.rfilter()
+    cell = 2.0 * radius / cells
+    sampler = sensor.sampler().clone()
+    sampler.set_sample_count(spp)
+    sampler.set_samples_per_wavefront(spp)
+    sampler.seed(seed, n * spp)
+    owner = dr.arange(mi.UInt32, n * spp) // spp  # lanes pixel-major, as Mitsuba's own
+
+    def offset(u):  # inverse CDF of the tabulated |filter|
+        k = dr.binary_search(0, cells - 1, lambda i: dr.gather(mi.Float, cdf, i + 1) <= u)
+        lo, hi = dr.gather(mi.Float, cdf, k), dr.gather(mi.Float, cdf, k + 1)
+        t = dr.select(hi > lo, (u - lo) / (hi - lo), 0.5)
+        return -radius + (mi.Float(k) + t) * cell
+
+    u = sampler.next_2d()
+    pixel = mi.Point2f(dr.gather(mi.Float, pixel_x, owner), dr.gather(mi.Float, pixel_y, owner))
+    if every:
+        position, weight = pixel + u, mi.Float(1.0)
+    else:
+        d = mi.Point2f(offset(u.x), offset(u.y))
+        position = pixel + 0.5 + d
+        # f / density is a constant of the filter's sign: the weight is that sign
+        weight = dr.sign(rfilter.eval(d.x) * rfilter.eval(d.y))
+    active = mi.Bool(True) if sample_border else (
+        (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
+    weight = dr.select(active, weight, 0.0)
+
+    ray, ray_weight = _camera_ray(sensor, sampler, position, spp)
+    zero = mi.Float(0.0)
+    rgb, alpha, invalid = mi.Color3f(0.0), zero, zero
+    if integrator is not None:
+        value, valid, _ = integrator.sample(scene, sampler, ray, None, active)
+        rgb = _rgb(ray_weight * value, ray.wavelengths, active)
+        finite = dr.all(dr.isfinite(rgb))
+        invalid = dr.select(active & ~finite, 1.0, 0.0)
+        rgb = dr.select(active & finite, rgb, 0.0)
+        alpha = dr.select(active & valid, 1.0, 0.0)
+    a_weight, a_rgb, normal = zero, mi.Color3f(0.0), mi.Vector3f(0.0)
+    if albedo:  # averaged over the samples that hit a surface
+        a_rgb, hit, normal = _albedo_along(scene, sampler, ray, active)
+        a_weight = dr.select(active & hit, weight, 0.0)
+    values = [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
+              weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
+              a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid,
+              a_weight * normal.x, a_weight * normal.y, a_weight * normal.z]
+    # Evaluate once: each reduction below would otherwise re-run the integrator.
+    dr.eval(values)
+    if every:
+        block = _new_block(film, rfilter)
+        block.put(position + mi.ScalarVector2f(crop_offset), values, active)
+        return block.tensor()
+    sums = [dr.block_sum(value, spp) for value in values]
+    dr.eval(sums)
+    return sums
+
+
+def _new_block(film, rfilter) -> mi.ImageBlock:
+    return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
+                         channel_count=_CHANNELS, rfilter=rfilter, border=False)
+
+
+#: The box pixel filter of each variant, made on first use.
+_BOX_FILTERS: dict = {}
+
+
+def box_filter():
+    """Mitsuba's ``box`` reconstruction filter (radius half a pixel) in the active variant."""
+    rfilter = _BOX_FILTERS.get(mi.variant())
+    if rfilter is None:
+        rfilter = _BOX_FILTERS[mi.variant()] = mi.load_dict({"type": "box"})
+    return rfilter
+
+
+def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
+                    replay=False, box=False):
+    """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
+    film = sensor.film()
+    width, height = (int(v) for v in film.crop_size())
+    rfilter = box_filter() if box else film.rfilter()
+    table = filter_table(rfilter)
+    every = _every_pixel(pixel_xy, width, height)
+    offset = mi.ScalarVector2f(film.crop_offset())
+    block = _new_block(film, rfilter) if every else None
+    sums = np.zeros((len(pixel_xy), _CHANNELS))
+    for k, (x, y) in enumerate(pixel_xy.tolist()):
+        sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
+        for s in range(spp):
+            u = sampler.next_2d()
+            if every:
+                px, py, weight = x + u[0], y + u[1], 1.0
+            else:
+                dx, dy = (float(v) for v in table.sample(np.array([u[0], u[1]])))
+                px, py = x + 0.5 + dx, y + 0.5 + dy
+                weight = float(np.sign(float(rfilter.eval(dx)) * float(rfilter.eval(dy))))
+            if not (film.sample_border() or (0 <= px < width and 0 <= py < height)):
+                sampler.advance()
+                continue
+            ray, ray_weight = _camera_ray(sensor, sampler, mi.Point2f(px, py), spp)
+            rgb, alpha, invalid = np.zeros(3), 0.0, 0.0
+            if integrator is not None:
+                value, valid, _ = integrator.sample(scene, sampler, ray, None, True)
+                rgb = np.asarray(_rgb(ray_weight * value, ray.wavelengths), dtype=np.float64)
+                alpha = 1.0 if valid else 0.0
+                if not np.isfinite(rgb).all():
+                    rgb, invalid = np.zeros(3), 1.0
+            a_rgb, a_weight, normal = np.zeros(3), 0.0, np.zeros(3)
+            if albedo:
+                a_rgb, hit, normal = _albedo_along(scene, sampler, ray, True)
+                a_rgb, a_weight = np.asarray(a_rgb, np.float64), weight if hit else 0.0
+                normal = np.asarray(normal, np.float64)
+            values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
+                                     a_weight * a_rgb, [a_weight, invalid],
+                                     a_weight * normal])
+            if every:
+                block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
+            else:
+                sums[k] += values
+            sampler.advance()
+    if every:
+        sums = np.array(block.tensor(), dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+    return _read_sums(sums, pixel_xy)
+
+
+#: The samples' kernels, replayed from a recording when the same trace repeats.
+_DEVELOP = Replay(_develop_kernel)

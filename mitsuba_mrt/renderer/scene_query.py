@@ -1,0 +1,223 @@
+"""What a scene holds, as the trace asks it (Mitsuba-specific).
+
+The scene's shapes in id order and a lookup from the shape a ray hit to its
+index; which shapes are mirrors (planar or curved) or purely diffuse, an
+``instance`` answering for the shapes of its ``shapegroup``; the point and
+spot lights whose visibility the ids track, and whether shadow rays are
+needed to find it; whether a trace of the scene can be replayed.  Nothing
+here traces a ray: it reads the scene's shapes, BSDFs and emitters.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Callable
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .lanes import is_jit
+
+#: At most this many lights are tracked in the ``visible_lights`` bit mask.
+MAX_TRACKED_LIGHTS = 32
+
+
+def has_mirrors(scene: mi.Scene) -> bool:
+    """True if a shape of ``scene`` (one inside a shape group included) has a
+    purely specular (delta) BSDF."""
+    return any(shows(scene, lambda shape: _is_mirror_bsdf(shape.bsdf()), any))
+
+
+def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:
+    """Per shape in :func:`ordered_shapes` order, ``combine`` (``any`` or
+    ``all``) of ``test`` over the shapes whose BSDFs it shows.
+
+    A shape shows its own; an ``instance`` shows the shapes of its
+    ``shapegroup`` (its own BSDF is a default diffuse that no ray meets).
+    Mitsuba does not say which group an instance refers to: where the groups
+    differ in ``test``, it is found by bounding box (the group's box carried
+    by the instance's transform is the instance's box), and where that
+    leaves several groups (or none), the instance shows the shapes of all
+    candidates (or of every group).
+    """
+    shapes = ordered_shapes(scene)
+    instance = [shape.class_name() == "Instance" for shape in shapes]
+    groups = _shape_groups(scene) if any(instance) else []
+    verdicts = {combine(test(inner) for inner in members) for _, members in groups}
+
+    def verdict(shape, inst: bool) -> bool:
+        if not inst or not groups:
+            return bool(test(shape))
+        if len(verdicts) == 1:
+            return next(iter(verdicts))
+        return combine(test(inner) for inner in _instance_surfaces(shape, groups))
+
+    return [verdict(shape, inst) for shape, inst in zip(shapes, instance)]
+
+
+def _shape_groups(scene: mi.Scene) -> list[tuple]:
+    """The scene's shape groups as (bounding box corners (8, 3), inner shapes)."""
+    def shapes_below(node) -> list:
+        found = []
+
+        class Collect(mi.TraversalCallback):
+            def put(self, name, value, *flags):
+                if isinstance(value, mi.Shape):
+                    found.append(value)
+
+        node.traverse(Collect())
+        return found
+
+    listed = scene.shapes()  # held, so that the traversal meets these very objects
+    known = {id(shape) for shape in listed}
+    groups = []
+    for node in shapes_below(scene):
+        if id(node) not in known and node.class_name() != "Instance":
+            groups.append((_box_corners(node.bbox()), shapes_below(node)))
+    return groups
+
+
+def _box_corners(box) -> np.ndarray:
+    low, high = np.ravel(box.min).astype(np.float64), np.ravel(box.max).astype(np.float64)
+    pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], dtype=bool)
+    return np.where(pick, high, low)
+
+
+def _instance_surfaces(instance, groups: list[tuple]) -> list:
+    """The shapes of the groups whose box, moved by ``instance``'s transform, is its box."""
+    to_world = np.asarray(mi.traverse(instance)["to_world"].matrix,
+                          dtype=np.float64).reshape(4, 4)
+    box = _box_corners(instance.bbox())
+    low, high = box.min(axis=0), box.max(axis=0)
+    tolerance = 1e-4 * max(1.0, float(np.abs(box).max()))
+    matches = []
+    for corners, inner in groups:
+        moved = corners @ to_world[:3, :3].T + to_world[:3, 3]
+        if (np.abs(moved.min(axis=0) - low).max() <= tolerance
+                and np.abs(moved.max(axis=0) - high).max() <= tolerance):
+            matches.append(inner)
+    return [shape for inner in (matches or [inner for _, inner in groups]) for shape in inner]
+
+
+#: Shape types whose mirror reflections keep their size (planar mirrors).
+PLANAR_TYPES = ("Rectangle", "Disk")
+
+
+def curved_mirror_indices(scene: mi.Scene) -> np.ndarray:
+    """1-based indices (as in :func:`ordered_shapes`) of mirrors that are not planar.
+
+    A curved mirror minifies what it reflects: its reflected regions can be
+    thinner than the traced grid, so refinement traces its pixels in full.
+    Meshes count as curved (their facets may point anywhere).
+    """
+    planar = {getattr(mi.ShapeType, name) for name in PLANAR_TYPES}
+    curved = shows(scene, lambda shape: (_is_mirror_bsdf(shape.bsdf())
+                                         and shape.shape_type() not in planar))
+    return np.flatnonzero(curved).astype(np.int64) + 1
+
+
+def _is_mirror_bsdf(bsdf) -> bool:
+    flags = int(bsdf.flags()) if bsdf is not None else 0
+    return mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth)
+
+
+def replayable(scene: mi.Scene) -> bool:
+    """Whether a trace of ``scene`` can be replayed (:mod:`.replay`): not in a
+    spectral or polarized variant (their colour tables are not among a
+    trace's inputs) and not without shapes (Dr.Jit finds no instance for the
+    intersection's virtual calls then)."""
+    return not (mi.is_spectral or mi.is_polarized) and len(scene.shapes()) > 0
+
+
+def tracked_lights(scene: mi.Scene) -> list:
+    """The scene's point and spot lights (delta position), at most 32."""
+    lights = [e for e in scene.emitters()
+              if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition)]
+    return lights[:MAX_TRACKED_LIGHTS]
+
+
+def shadow_rule(scene: mi.Scene, lights: list) -> str:
+    """How light visibility is found: ``rays``, or without shadow rays.
+
+    ``none`` (no point or spot light), ``facing`` (a single sphere: a point
+    sees a light exactly when it faces it, as a shadow ray would find) or
+    ``always`` (a single planar shape never blocks a light from itself).
+    """
+    if not lights:
+        return "none"
+    shapes = scene.shapes()
+    if len(shapes) == 1:
+        kind = shapes[0].shape_type()
+        if kind == int(mi.ShapeType.Sphere):
+            return "facing"
+        if kind in (int(mi.ShapeType.Rectangle), int(mi.ShapeType.Disk)):
+            return "always"
+    return "rays"
+
+
+def _natural_key(text: str):
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", text)]
+
+
+def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
+    """Per shape index (1-based, as in :func:`ordered_shapes`; entry 0 for no
+    shape), whether the shape's BSDF is purely diffuse (an instance's: all
+    those of its group's shapes): its albedo is then its reflectance at the
+    hit, exact for every sample."""
+    other = (mi.BSDFFlags.Glossy, mi.BSDFFlags.Delta, mi.BSDFFlags.Transmission)
+
+    def diffuse(bsdf) -> bool:
+        flags = int(bsdf.flags()) if bsdf is not None else 0
+        return (mi.has_flag(flags, mi.BSDFFlags.DiffuseReflection)
+                and not any(mi.has_flag(flags, f) for f in other))
+
+    return np.array([False] + shows(scene, lambda shape: diffuse(shape.bsdf()), all), dtype=bool)
+
+
+def ordered_shapes(scene: mi.Scene) -> list:
+    """The scene's shapes in id order (natural sort of ``shape.id()``).
+
+    ``scene.shapes()`` is not in file order, and the paper's id rule and
+    smoothing depend on the order, so shapes are numbered by their ``id``
+    attributes: ``sphere_2`` before ``sphere_10``; the bundled scenes name
+    their shapes in the report's table order.
+    """
+    shapes = list(scene.shapes())
+    order = sorted(range(len(shapes)), key=lambda k: (_natural_key(shapes[k].id()), k))
+    return [shapes[k] for k in order]
+
+
+def _shape_lookup(scene: mi.Scene):
+    """Map from Dr.Jit shape pointers (JIT) or shape objects (scalar) to 1-based indices."""
+    shapes = ordered_shapes(scene)
+    if is_jit():
+        keys = np.array([_jit_pointer(s) for s in shapes], dtype=np.int64)
+        order = np.argsort(keys)
+        return keys[order], order + 1
+    return {id(s): k + 1 for k, s in enumerate(shapes)}
+
+
+def _jit_pointer(shape) -> int:
+    """``shape``'s Dr.Jit pointer (as ``UInt32``), as a JIT trace reports the shape it hit."""
+    return int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
+
+
+def _inner_lookup(scene: mi.Scene) -> dict[int, int]:
+    """Map from the shapes inside the scene's shape groups to a number each, 1-based.
+
+    The scene does not list these shapes, so they have no index of their
+    own.  They are numbered as :func:`ordered_shapes` numbers the listed
+    ones, by the natural order of their ids, ties in the order
+    :func:`_shape_groups` finds them (group by group, then within a
+    group): by what the scene is, not by where its objects live, so each
+    load of a scene gives them the same numbers.  Keys are what the id
+    trace reports for a hit inside a group: the Dr.Jit pointer (JIT) or
+    the address of the C++ object (scalar).
+    """
+    inner = [shape for _, members in _shape_groups(scene) for shape in members]
+    inner = sorted(inner, key=lambda shape: _natural_key(shape.id()))  # stable: ties keep order
+    numbers: dict[int, int] = {}
+    for shape in inner:
+        numbers.setdefault(_jit_pointer(shape) if is_jit() else shape.ptr, len(numbers) + 1)
+    return numbers

@@ -1,0 +1,31 @@
+"""The package's caches for the life of the process, and clearing them.
+
+A few modules keep what is costly to make and the same each time it is
+made: the trace's recorded kernels and the Mitsuba objects held for them,
+a filter or integrator made once per variant, the tables of the pixel
+filters, the OIDN device and filters, interpolation weights.  None of them
+changes a result.  :func:`clear_caches` drops them all, to free what they
+hold or to time a first call again; docs/ARCHITECTURE.md (Process-wide
+state) lists each, with the state that is not a cache and stays.
+"""
+
+from __future__ import annotations
+
+from ..recon import denoise, quadric_jit, rbf_fast
+from . import develop, guides, pixel_filter, replay
+
+
+def clear_caches() -> None:
+    """Drop every cache the package keeps for the process; each is made anew on next use.
+
+    Later renders give the same images; the first of each kind records its
+    kernels again (Dr.Jit's own cache of compiled kernels is not cleared).
+    """
+    replay.clear_recordings()
+    develop._BOX_FILTERS.clear()
+    guides._integrators.clear()
+    pixel_filter._TABLES.clear()
+    denoise.release()
+    rbf_fast._tensor_weights.cache_clear()
+    rbf_fast._near_table.cache_clear()
+    quadric_jit.available.cache_clear()
