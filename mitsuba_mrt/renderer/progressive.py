@@ -1,15 +1,15 @@
 """A full render in passes, denoised: a time limit and a noise threshold for Mitsuba's JIT variants.
 
-Every pass traces each pixel once more (1 spp, a box pixel filter; the
-first :data:`GUIDE_PASSES` also the albedo and shading normal of the same
-samples, OIDN's guides), and the
-passes go on in rounds that double their number until the denoised image's
+Every pass traces each pixel once more (a box pixel filter; the first
+:data:`GUIDE_PASSES` also the albedo and shading normal of the same
+samples, OIDN's guides), and the passes go on in rounds that double their
+number (each round two launches, its two halves) until the denoised image's
 estimated error meets the target, the next round would overrun the time
 left, or the spp reach the cap; then the mean of the passes goes through
 OIDN once.  Blender Cycles' time limit and noise threshold work the same way.
 
 The error needs no reference: after a round of ``k`` passes, the mean of
-the even passes is denoised and compared with the mean of the odd ones,
+one half of them is denoised and compared with the mean of the other,
 which are independent of it; their difference, less the odd mean's own
 noise (the passes' per-pixel variance over ``k / 2``), estimates the squared
 error of the image denoised from ``k / 2`` passes, and the last two rounds
@@ -48,54 +48,63 @@ class Passes:
     """Running sums of the passes so far, per pixel (flat, ``(n, 3)``).
 
     The image is the sum over every pixel (``total``); the estimates read
-    sums over the pixels of ``crop`` alone, each pass's values clipped at
-    :data:`ESTIMATE_CLIP` first, so that a rare bright sample (a caustic's
-    firefly) does not swamp what the other pixels say: ``even`` and ``odd``
-    (the two halves), ``square`` (for the variance).
+    sums over the pixels of ``crop`` alone, each trace's pixel means (and
+    variances) clipped at :data:`ESTIMATE_CLIP` (squared) first, so that a
+    rare bright sample (a caustic's firefly) does not swamp what the other
+    pixels say: ``halves`` (the sums of the two independent halves) and
+    ``square`` (of the samples, for the variance).  Counts are samples per pixel.
     """
 
     crop: np.ndarray
     count: int = 0
     guides: int = 0
     total: np.ndarray | None = None
-    even: np.ndarray | None = None
-    odd: np.ndarray | None = None
+    halves: list = field(default_factory=list)
+    half_counts: list = field(default_factory=lambda: [0, 0])
     square: np.ndarray | None = None
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
     alpha: np.ndarray | None = None
 
-    def add(self, radiance, albedo, normal, alpha) -> None:
+    def add(self, trace, half: int, guides: bool) -> None:
+        """Add ``trace`` (every pixel, at its spp) to half 0 or 1."""
+        spp, radiance = trace.spp, trace.radiance
         if self.count == 0:
             self.total = np.zeros_like(radiance)
-            zero = np.zeros((len(self.crop), 3))
-            self.even, self.odd, self.square = zero.copy(), zero.copy(), zero.copy()
+            self.halves = [np.zeros((len(self.crop), 3)), np.zeros((len(self.crop), 3))]
+            self.square = np.zeros((len(self.crop), 3))
             self.albedo, self.normal = np.zeros_like(radiance), np.zeros_like(radiance)
             self.alpha = np.zeros(len(radiance))
-        self.total += radiance
+        self.total += spp * radiance
         clipped = np.minimum(radiance[self.crop], ESTIMATE_CLIP)
-        (self.even if self.count % 2 == 0 else self.odd)[...] += clipped
-        self.square += clipped ** 2
-        if albedo is not None:
-            self.albedo += albedo
-            self.normal += normal
-            self.guides += 1
-        if alpha is not None:
-            self.alpha += alpha
-        self.count += 1
+        self.halves[half] += spp * clipped
+        self.half_counts[half] += spp
+        self.square += spp * (np.minimum(trace.variance[self.crop], ESTIMATE_CLIP ** 2)
+                              + clipped ** 2)
+        if guides:
+            self.albedo += spp * trace.albedo
+            self.normal += spp * trace.normal
+            self.guides += spp
+        if trace.alpha is not None:
+            self.alpha += spp * trace.alpha
+        self.count += spp
 
     @property
     def mean(self) -> np.ndarray:
         return self.total / self.count
 
+    def half_mean(self, half: int) -> np.ndarray:
+        """The mean of one half over ``crop`` (clipped, see the class)."""
+        return self.halves[half] / self.half_counts[half]
+
     def guide(self, index=slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        """(albedo, normal): the means of the passes that traced them."""
+        """(albedo, normal): the means of the samples that traced them."""
         return self.albedo[index] / self.guides, self.normal[index] / self.guides
 
     @property
     def variance(self) -> np.ndarray:
-        """A single pass's variance per pixel of ``crop`` and channel (unbiased)."""
-        mean = (self.even + self.odd) / self.count
+        """A single sample's variance per pixel of ``crop`` and channel (unbiased)."""
+        mean = (self.halves[0] + self.halves[1]) / self.count
         return np.maximum(self.square / self.count - mean ** 2, 0.0) * (
             self.count / max(self.count - 1, 1))
 
@@ -217,17 +226,17 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     n = len(xy)
     rows = estimate_rows(height)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
-    one = replace(tracer, spp=1)
-    passes, progress = Passes(crop), Progress()
+    passes, progress, launch = Passes(crop), Progress(), 0
     round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
     while True:
         begin = time.perf_counter()
-        for _ in range(round_size):  # recorded once, replayed with new seeds
-            guides = passes.count < GUIDE_PASSES
-            trace = one(xy, stream=SeedStream.LADDER + passes.count, aovs=guides, ids=False,
-                        box=True, replay=True)
-            passes.add(trace.radiance, trace.albedo if guides else None,
-                       trace.normal if guides else None, trace.alpha)
+        guides = passes.count < GUIDE_PASSES
+        each = replace(tracer, spp=round_size // 2)
+        for half in (0, 1):  # the two halves of the round, each one launch
+            trace = each(xy, stream=SeedStream.LADDER + launch, aovs=guides, ids=False,
+                         box=True, replay=True)
+            passes.add(trace, half, guides)
+            launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
@@ -238,15 +247,15 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             half = passes.count // 2
             shape = (len(rows), width, 3)
             albedo, normal = passes.guide(crop)
-            denoised = denoise_image((passes.even / half).reshape(shape), albedo.reshape(shape),
+            denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
                                      normal.reshape(shape), quality=quality).reshape(-1, 3)
             oidn_px = (time.perf_counter() - begin) / len(crop)
-            squared = (np.clip(denoised, 0.0, 1.0) - passes.odd / half) ** 2 - variance / half
+            squared = (np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2 - variance / half
             progress.history.append((half, relative_error(squared, denoised)))
             progress.predicted = predict(progress.history, passes.count)
             progress.full_error = relative_error(variance / (full_spp * area), denoised)
         else:
-            mean = (passes.even + passes.odd) / passes.count
+            mean = (passes.halves[0] + passes.halves[1]) / passes.count
             progress.predicted = relative_error(variance / passes.count, mean)
             progress.full_error = relative_error(variance / (full_spp * area), mean)
         progress.estimate_s += time.perf_counter() - begin
