@@ -113,8 +113,8 @@ def _why(result) -> str:
         return "asked for"
     choice = plan.choice
     text = f"auto: {choice.label}, {plan.reason}"
-    if plan.candidates:
-        text += f" (predicted {choice.seconds:.2f} s, error {choice.error:.4f})"
+    if choice.error is not None:
+        text += f" (estimated error {choice.error:.4f})"
     return text
 
 

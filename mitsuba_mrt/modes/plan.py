@@ -47,11 +47,12 @@ class Candidate:
         The MRT mode (``fast``, ``refine``, ``idpass``) of an ``mrt`` candidate.
     denoise : bool
         Whether OIDN runs (on the image, or on the MRT's grid).
-    seconds : float
-        Predicted wall time of the render, the pilot's and kernel compilation left out.
-    error : float
+    seconds : float or None
+        Predicted wall time of the render, the pilot's and kernel compilation
+        left out (None: not predicted).
+    error : float or None
         Predicted relative RMS error against the converged render (see
-        :mod:`mitsuba_mrt.renderer.pilot`).
+        :mod:`mitsuba_mrt.renderer.pilot`; None: not predicted).
     compile_s : float
         Predicted seconds of compiling the kernels this candidate needs that
         the process has not compiled yet (counted only against a time limit).
@@ -62,8 +63,8 @@ class Candidate:
     spp: int
     mode: str | None = None
     denoise: bool = False
-    seconds: float = math.inf
-    error: float = math.inf
+    seconds: float | None = None
+    error: float | None = None
     compile_s: float = 0.0
 
     @property
@@ -138,19 +139,23 @@ def choose(candidates: list, *, target_error: float | None = None,
         raise MRTError("the planner needs at least one candidate")
 
     def cost(c: Candidate) -> float:
-        return c.seconds + (c.compile_s if time_limit is not None else 0.0)
+        seconds = math.inf if c.seconds is None else c.seconds
+        return seconds + (c.compile_s if time_limit is not None else 0.0)
+
+    def error(c: Candidate) -> float:
+        return math.inf if c.error is None else c.error
 
     fits = [c for c in candidates if time_limit is None or cost(c) <= time_limit]
     if not fits:
         choice, reason = min(candidates, key=cost), "nothing fits the time limit: the cheapest candidate"
     else:
-        meeting = [c for c in fits if target_error is not None and c.error <= target_error]
+        meeting = [c for c in fits if target_error is not None and error(c) <= target_error]
         if meeting:
             choice = min(meeting, key=cost)
             reason = "the cheapest that meets the target" + (
                 " within the time limit" if time_limit is not None else "")
         else:
-            choice = min(fits, key=lambda c: (c.error, cost(c)))
+            choice = min(fits, key=lambda c: (error(c), cost(c)))
             reason = ("the most accurate within the time limit" if time_limit is not None
                       else "none meets the target: the most accurate")
     return Plan(choice, reason, list(candidates), target_error, time_limit, time_limit)

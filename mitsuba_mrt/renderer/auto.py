@@ -5,8 +5,10 @@
 measure how good the denoised image gets, so the common case spends nothing
 on planning.  Under a time limit the passes fill it.  Without one they go
 on until the estimated error meets ``noise_threshold`` (default: the full
-render's own noise at the scene's spp), unless a round (the third on)
-predicts that meeting it in passes costs more than a full render:
+render's own noise at the scene's spp, or the scene's spp), unless the scene
+is noise-free (a full render's error is 0) or, for a threshold asked for, a
+round (the third on) predicts that meeting it in passes costs more than a
+full render:
 then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the
 image where their grid costs less, and the planner
 (:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest candidate that
@@ -98,8 +100,11 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         if deadline is not None or not denoise:
             return None
         target = params.noise_threshold or progress.full_error
-        if target > 0 and len(progress.history) < CHECK_AFTER_ROUNDS:
-            return None  # too few rounds to tell how fast the error falls
+        if target > 0 and (params.noise_threshold is None
+                           or len(progress.history) < CHECK_AFTER_ROUNDS):
+            # the full render's own noise: passes to the scene's spp meet it at
+            # a full render's cost, near enough; or too few rounds to tell
+            return None
         needed = needed_spp(progress.history, target)  # the spp of the final image
         costs.update(passes=max(needed - progress.spp, 0.0) * pass_s,
                      full=spp * pass_s / PASS_SAMPLES, mrt=params.sample_fraction * spp * pass_s,

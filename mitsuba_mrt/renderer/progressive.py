@@ -36,6 +36,9 @@ DEFAULT_RATE, RATE_RANGE = 0.5, (0.2, 1.0)
 #: Passes that also trace the albedo and normals, OIDN's guides (they cost
 #: about half a sample more each, and the guides converge long before the colour).
 GUIDE_PASSES = 4
+#: A round's predicted time is its passes' at the last round's rate times this:
+#: a launch of a new spp is recorded before it is replayed, which costs more.
+ROUND_SAFETY = 1.3
 #: Strips of rows the error is estimated on (a quarter of the image's rows).
 ESTIMATE_STRIPS = 4
 #: Each pass's radiance is clipped at this for the estimates (a display shows
@@ -275,7 +278,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         if passes.count + next_size > max_spp:
             progress.stopped = f"reached {passes.count} spp"
             break
-        if deadline is not None and (time.perf_counter() + next_size * pass_s
+        if deadline is not None and (time.perf_counter() + ROUND_SAFETY * next_size * pass_s
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             break
