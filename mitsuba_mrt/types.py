@@ -62,11 +62,11 @@ class MRTParams:
         many noise standard deviations (the trace's own variance) before
         interpolating; traced pixels keep their traced value; 0: off.
     time_limit : float or None
-        Mode ``auto``: seconds the whole render may take, its pilot
-        included; the plan is the most accurate that fits (None: no limit).
+        Mode ``auto``: seconds the whole render may take; denoised passes
+        fill them (None: no limit).
     noise_threshold : float or None
         Mode ``auto``: the largest estimated relative RMS error accepted;
-        the plan is the cheapest that meets it (None: a full render's own
+        the passes end when they meet it (None: a full render's own noise
         at the scene's spp, or, with ``time_limit`` alone, the best in time).
     """
 

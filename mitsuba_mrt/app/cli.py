@@ -40,11 +40,11 @@ _PARAM_OPTIONS = (
     ("num_cappoints", int, "brightest and darkest capstones per id"),
     ("noise_smoothing", float, "in fast, refine and idpass, average traced grid values "
                                "that agree within this many noise sigmas; 0: off"),
-    ("time_limit", float, "mode auto: seconds the whole render may take, its pilot "
-                          "included; the most accurate plan that fits"),
+    ("time_limit", float, "mode auto: seconds the whole render may take; denoised "
+                          "passes fill them"),
     ("noise_threshold", float, "mode auto: the largest estimated relative RMS error "
-                               "accepted; the cheapest plan that meets it (default: a full "
-                               "render's own at the scene's spp)"),
+                               "accepted; the passes end when they meet it (default: a full "
+                               "render's own noise at the scene's spp)"),
 )
 
 
@@ -93,9 +93,9 @@ def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) ->
                         help="print the JSON summary" + (" of every task" if batch else ""))
     parser.add_argument("--mode", default=None, metavar="MODE",
                         help="reconstruction mode: " + ", ".join(_modes())
-                             + "; auto: the plan a measured pilot picks: a full render, the "
-                               "same denoised with OIDN, or an MRT mode (default: the scene's "
-                               "mrt integrator's mode, else auto)")
+                             + "; auto: the image in denoised passes until --noise-threshold "
+                               "or --time-limit, or a full render where nothing is to gain "
+                               "(default: the scene's mrt integrator's mode, else auto)")
     _add_mrt_options(parser)
 
 

@@ -140,16 +140,18 @@ class MRTIntegrator(mi.SamplingIntegrator):
          deviations of the trace's noise, before interpolating; 0: off (Default: 1.5).
      * - time_limit
        - |float|
-       - Mode ``auto``: seconds the whole render may take, its pilot included;
-         the most accurate plan that fits (Default: none).
+       - Mode ``auto``: seconds the whole render may take; the denoised passes
+         fill them (Default: none).
      * - noise_threshold
        - |float|
        - Mode ``auto``: the largest estimated relative RMS error accepted; the
-         cheapest plan that meets it (Default: a full render's own at the scene's spp).
+         passes end when they meet it (Default: a full render's own noise at the
+         scene's spp).
      * - mode
        - |string|
-       - ``auto``: the plan a measured pilot picks (a full render, the same
-         denoised with OIDN, or an MRT mode); or a reconstruction: ``paper``,
+       - ``auto``: the image in denoised passes (box filter, OIDN) until
+         ``noise_threshold`` or ``time_limit``; a full render where nothing
+         is to gain; or a reconstruction: ``paper``,
          ``fast``, ``refine``, ``idpass``, ``nearest``, ``bicubic`` (Default: auto).
      * - aovs
        - |bool|
