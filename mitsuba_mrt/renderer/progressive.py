@@ -172,7 +172,7 @@ def needed_spp(history: list, target: float) -> float:
 
     Examples
     --------
-    >>> needed_spp([(1, 0.4), (2, 0.2)], 0.1)
+    >>> round(needed_spp([(1, 0.4), (2, 0.2)], 0.1), 6)
     4.0
     """
     if target <= 0:
