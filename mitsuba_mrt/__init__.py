@@ -29,7 +29,8 @@ from .types import MRTParams, Reconstruction, Skips, SparseTrace, Timings
 __version__ = "0.1.0"
 
 __all__ = ["MODES", "MRTError", "MRTParams", "MRTResult", "MRTWarning", "activate",
-           "load_scene", "reconstruct", "register", "render", "render_reference"]
+           "load_scene", "reconstruct", "register", "render", "render_denoised",
+           "render_reference"]
 
 
 def activate(variant: str = "auto") -> str:
@@ -49,7 +50,7 @@ def register() -> None:
 def __getattr__(name):
     # The Mitsuba-facing API is imported on first use, so that the numpy
     # stages work without choosing a variant.
-    if name in ("render", "render_reference", "MRTResult"):
+    if name in ("render", "render_reference", "render_denoised", "MRTResult"):
         from .renderer import api
 
         return getattr(api, name)

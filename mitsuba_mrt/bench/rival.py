@@ -23,9 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..modes.plan import Candidate, Plan
 from ..recon.metrics import paper_error
-from ..types import MRTParams
 
 #: spp of the alternative's ladder.
 LADDER = (1, 2, 4, 8, 16, 32, 64)
@@ -76,7 +74,7 @@ def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarr
 
 def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool) -> list[Row]:
     """Every method of the module on one scene, as :class:`Row` s."""
-    from ..renderer.api import GridTracer, _denoised_full, render, render_reference
+    from ..renderer.api import GridTracer, render, render_denoised, render_reference
     from ..renderer.scene import load_scene, unwrap
 
     scene = load_scene(path, **defines)
@@ -91,9 +89,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
 
     def alternative(s):
-        plan = Plan(Candidate("full+oidn", "denoised", s, denoise=True), "the bench's")
-        return lambda: _denoised_full(replace(tracer, spp=s), MRTParams(), plan,
-                                      time.perf_counter())
+        return lambda: render_denoised(scene, spp=s)
 
     methods = {"full": lambda: render_reference(scene, spp=spp)}
     methods.update({f"oidn@{s}": alternative(s) for s in ladder})
@@ -120,13 +116,18 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
         outputs[key], times[key] = out, runs
     rows = []
     for k, out in outputs.items():
-        image, used = (out[0], "full") if isinstance(out, tuple) else (out.image, out.mode_used)
+        if isinstance(out, tuple):  # render_reference's, render_denoised's
+            image, used = out[0], "full+oidn" if k.startswith("oidn@") else "full"
+        else:
+            image, used = out.image, out.mode_used
         kind = "box" if used == "full+oidn" else "film"
         seconds = statistics.median(times[k])
         chose = ""
         if not isinstance(out, tuple) and out.auto is not None:
             chose = out.auto.choice.label
-        rows.append(Row(name, k, spp if k == "full" else int(out.spp), seconds,
+        spp_used = int(k.split("@")[1]) if k.startswith("oidn@") else (
+            spp if k == "full" else int(out.spp))
+        rows.append(Row(name, k, spp_used, seconds,
                         seconds / full_s, paper_error(image, truth[kind]),
                         rel_mse(image, truth[kind]), chose))
     return rows

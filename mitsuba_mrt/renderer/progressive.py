@@ -36,14 +36,18 @@ DEFAULT_RATE, RATE_RANGE = 0.5, (0.2, 1.0)
 #: Passes that also trace the albedo and normals, OIDN's guides (they cost
 #: about half a sample more each, and the guides converge long before the colour).
 GUIDE_PASSES = 4
+#: Rounds before an estimate may say the target is met: the first (1 spp
+#: against 1 spp) is the noisiest, and a firefly can make it say 0.
+MIN_ROUNDS_MET = 2
 #: A round's predicted time is its passes' at the last round's rate times this:
 #: a launch of a new spp is recorded before it is replayed, which costs more.
 ROUND_SAFETY = 1.3
 #: Strips of rows the error is estimated on (a quarter of the image's rows).
 ESTIMATE_STRIPS = 4
-#: Each pass's radiance is clipped at this for the estimates (a display shows
-#: up to 1): a bright sample's excess is noise the estimates cannot average out.
-ESTIMATE_CLIP = 4.0
+#: Each pass's radiance is clipped at this for the estimates, as a display
+#: (and the report's metric) clips: a bright sample's excess is noise the
+#: estimates cannot average out.
+ESTIMATE_CLIP = 1.0
 
 
 @dataclass
@@ -266,7 +270,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
         target = progress.full_error if target_error is None and deadline is None \
             else target_error
-        if target is not None and progress.predicted <= target:
+        if (target is not None and progress.predicted <= target
+                and len(progress.history) >= MIN_ROUNDS_MET):
             progress.stopped = "met the target"
             break
         if stop_early is not None:
