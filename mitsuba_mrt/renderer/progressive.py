@@ -227,43 +227,30 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     is a ``time.perf_counter()`` value.  ``stop_early(progress, pass_s)``,
     called after every round, may end the passes (return a reason).
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
-    Without ``denoise`` the image is the passes' mean.  Under a ``deadline``
-    with no ``target_error`` nothing is estimated and a round is one launch,
-    the first of 1 spp.
+    Without ``denoise`` the image is the passes' mean.
     """
     xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     n = len(xy)
     rows = estimate_rows(height)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     passes, progress, launch = Passes(crop), Progress(), 0
-    # under a time limit alone nothing is estimated: a round is one launch
-    timed_only = target_error is None and deadline is not None
-    round_size, pass_s, oidn_px = (1 if timed_only else FIRST_ROUND), 0.0, 0.0
+    round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
     while True:
         begin = time.perf_counter()
         guides = passes.count < GUIDE_PASSES
-        launches = 1 if timed_only else 2  # (the estimates compare the round's halves)
-        each = replace(tracer, spp=max(round_size // launches, 1))
-        for _ in range(launches):
+        each = replace(tracer, spp=round_size // 2)
+        for half in (0, 1):  # the two halves of the round, each one launch
             trace = each(xy, stream=SeedStream.LADDER + launch, aovs=guides, ids=False,
                          box=True, replay=True)
-            passes.add(trace, launch % 2, guides)
+            passes.add(trace, half, guides)
             launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
         progress.spp = passes.count
         begin = time.perf_counter()
-        if timed_only:  # no estimates: what the final OIDN call will cost, once
-            if denoise and not oidn_px:
-                albedo, normal = passes.guide(crop)
-                shape = (len(rows), width, 3)
-                denoise_image(((passes.halves[0] + passes.halves[1]) / passes.count
-                               ).reshape(shape), albedo.reshape(shape), normal.reshape(shape),
-                              quality=quality)
-                oidn_px = (time.perf_counter() - begin) / len(crop)
-        elif denoise:
-            variance = passes.variance
+        variance = passes.variance
+        if denoise:
             half = passes.count // 2
             shape = (len(rows), width, 3)
             albedo, normal = passes.guide(crop)
@@ -275,7 +262,6 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             progress.predicted = predict(progress.history, passes.count)
             progress.full_error = relative_error(variance / (full_spp * area), denoised)
         else:
-            variance = passes.variance
             mean = (passes.halves[0] + passes.halves[1]) / passes.count
             progress.predicted = relative_error(variance / passes.count, mean)
             progress.full_error = relative_error(variance / (full_spp * area), mean)

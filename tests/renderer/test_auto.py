@@ -171,10 +171,10 @@ def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
     assert result.params.denoise == "oidn" and result.timings.denoise > 0
 
 
-def test_a_time_limit_below_a_launch_ends_after_the_first(scene):
+def test_a_time_limit_below_a_round_ends_after_the_first(scene):
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
-    assert plan.reason == "denoised passes: the time limit" and result.spp == 1
+    assert plan.reason == "denoised passes: the time limit" and result.spp == 2
     assert plan.time_limit == 1e-6 and plan.target_error is None
 
 
