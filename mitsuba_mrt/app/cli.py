@@ -100,9 +100,9 @@ def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) ->
 
 
 def _modes() -> list[str]:
-    from ..modes import MODES
+    from ..modes import RENDER_MODES
 
-    return ["auto"] + list(MODES)
+    return list(RENDER_MODES)
 
 
 def build_parser() -> argparse.ArgumentParser:

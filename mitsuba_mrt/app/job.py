@@ -33,7 +33,13 @@ class RenderJob:
     out_dir: str = "out"
     defines: dict = field(default_factory=dict)
     params: MRTParams | None = None
-    param_overrides: dict = field(default_factory=dict)
+    param_overrides: dict[str, object] = field(default_factory=dict)
+
+    def params_for(self, scene_params: MRTParams | None) -> MRTParams:
+        """The render's parameters: ``params``, else the scene's, else the
+        defaults, with ``param_overrides`` on top (:meth:`MRTParams.with_`,
+        which validates them)."""
+        return (self.params or scene_params or MRTParams()).with_(**self.param_overrides)
     spp: int | None = None
     seed: int = 0
     variant: str = "auto"
@@ -129,7 +135,7 @@ def run_render_job(job: RenderJob) -> RunSummary:
     """
     from ..renderer.api import render, render_reference
     from ..renderer.aovs import aov_images
-    from ..renderer.scene import load_scene
+    from ..renderer.scene import load_scene, unwrap
     from ..renderer.variants import activate, environment
 
     check_output_folder(job.out_dir)  # before any work
@@ -137,8 +143,9 @@ def run_render_job(job: RenderJob) -> RunSummary:
     with progress_bar(job.progress) as tell:
         tell("load", 0.0)
         scene = load_scene(job.scene, **job.defines)  # checks the film's size
-        result = render(scene, spp=job.spp, seed=job.seed, params=job.params, mode=job.mode,
-                        progress=tell, **job.param_overrides)
+        params = job.params_for(unwrap(scene).params)
+        result = render(scene, spp=job.spp, seed=job.seed, params=params, mode=job.mode,
+                        progress=tell)
     stem = Path(job.scene).stem
     height, width = result.ids.shape
     full = result.mode_used == "full"

@@ -35,6 +35,11 @@ MODES = {
     "bicubic": bicubic_reconstruct,  # baseline: bicubic spline through the grid
 }
 
+#: What :func:`mitsuba_mrt.render` takes as ``mode``: ``auto`` (a measured
+#: plan, :mod:`mitsuba_mrt.renderer.auto`, which may run any of the others or
+#: a full render) and every reconstruction of :data:`MODES`.
+RENDER_MODES = ("auto",) + tuple(MODES)
+
 #: Modes that need a tracer (they trace pixels beyond the grid).
 TRACING_MODES = ("refine", "idpass")
 
@@ -49,10 +54,10 @@ OUTPUT_DENOISED_MODES = ("refine",)
 SMOOTHED_MODES = ("fast", "refine", "idpass")
 
 
-def check_mode(mode: str, extra: tuple[str, ...] = ()) -> str:
-    """``mode`` if it is one of ``extra`` or :data:`MODES`, else MRTError."""
-    if mode not in extra and mode not in MODES:
-        raise MRTError(f"unknown mode {mode!r}; choose one of {', '.join(extra + tuple(MODES))}")
+def check_mode(mode: str, choices: tuple[str, ...] = tuple(MODES)) -> str:
+    """``mode`` if it is one of ``choices`` (default: :data:`MODES`), else MRTError."""
+    if mode not in choices:
+        raise MRTError(f"unknown mode {mode!r}; choose one of {', '.join(choices)}")
     return mode
 
 

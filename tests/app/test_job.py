@@ -1,3 +1,5 @@
+import pytest
+
 from mitsuba_mrt.app.job import RunSummary, summary_line
 from mitsuba_mrt.types import Skips, Timings, TracedCounts
 
@@ -30,3 +32,15 @@ def test_the_progress_bar_is_silent_off_a_terminal(capsys):
     with progress_bar(True) as tell:  # pytest's stderr is no terminal
         tell("passes (2 spp)", 0.5)
     assert capsys.readouterr().err == ""
+
+
+def test_a_jobs_overrides_go_on_top_of_the_scenes_parameters():
+    from mitsuba_mrt import MRTError, MRTParams
+    from mitsuba_mrt.app.job import RenderJob
+
+    job = RenderJob(scene="x.xml", param_overrides={"sample_fraction": 0.2})
+    scene_params = MRTParams(filter_sigma=2.0)
+    assert job.params_for(scene_params) == MRTParams(filter_sigma=2.0, sample_fraction=0.2)
+    assert job.params_for(None) == MRTParams(sample_fraction=0.2)
+    with pytest.raises(MRTError, match="sample_fraction"):
+        RenderJob(scene="x.xml", param_overrides={"sample_fraction": 2.0}).params_for(None)
