@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -94,21 +95,32 @@ PROGRESS_AFTER = 2.0
 @contextlib.contextmanager
 def progress_bar(enabled: bool):
     """A ``progress(stage, done)`` callback that draws a tqdm bar on stderr
-    once the work has taken :data:`PROGRESS_AFTER` seconds; nothing where
-    not ``enabled`` or stderr is not a terminal."""
+    once the work has taken :data:`PROGRESS_AFTER` seconds (redrawn twice a
+    second, so that its clock runs between stages); nothing where not
+    ``enabled`` or stderr is not a terminal."""
     if not (enabled and sys.stderr.isatty()):
         yield lambda stage, done: None
         return
-    bar = tqdm(total=100, file=sys.stderr, bar_format="{desc} {bar} {percentage:3.0f}%",
+    bar = tqdm(total=100, file=sys.stderr, bar_format="{desc} {bar} {percentage:3.0f}% {elapsed}",
                delay=PROGRESS_AFTER, leave=False)
+    closed = threading.Event()
+
+    def redraw() -> None:
+        if not closed.wait(PROGRESS_AFTER):
+            while not closed.wait(0.5):
+                bar.refresh()
 
     def tell(stage: str, done: float) -> None:
         bar.set_description_str(stage, refresh=False)
         bar.update(max(0, round(100 * done) - bar.n))
 
+    thread = threading.Thread(target=redraw, daemon=True)
+    thread.start()
     try:
         yield tell
     finally:
+        closed.set()
+        thread.join()
         bar.close()
 
 
