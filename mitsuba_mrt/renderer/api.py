@@ -13,7 +13,7 @@ Example::
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi

@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
