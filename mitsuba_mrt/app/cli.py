@@ -100,9 +100,9 @@ def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) ->
 
 
 def _modes() -> list[str]:
-    from ..modes import RENDER_MODES
+    from ..modes import render_modes
 
-    return list(RENDER_MODES)
+    return list(render_modes())
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import MRTError, one_line
-from ..modes import RENDER_MODES, check_mode
+from ..modes import check_mode, render_modes
 from ..renderer.variants import VARIANT_CHOICES
 from ..runtime import configure
 from ..types import MRTParams
@@ -79,7 +79,7 @@ def check_job_options(options: dict) -> dict:
         raise MRTError(f"unknown render options: {', '.join(sorted(unknown))}")
     MRTParams(**options.get("param_overrides", {}))
     if options.get("mode") is not None:
-        check_mode(options["mode"], RENDER_MODES)
+        check_mode(options["mode"], render_modes())
     if options.get("spp") is not None and int(options["spp"]) < 1:
         raise MRTError(f"spp must be >= 1, got {options['spp']}")
     variant = options.get("variant", "auto")

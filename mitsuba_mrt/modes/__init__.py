@@ -35,10 +35,11 @@ MODES = {
     "bicubic": bicubic_reconstruct,  # baseline: bicubic spline through the grid
 }
 
-#: What :func:`mitsuba_mrt.render` takes as ``mode``: ``auto`` (a measured
-#: plan, :mod:`mitsuba_mrt.renderer.auto`, which may run any of the others or
-#: a full render) and every reconstruction of :data:`MODES`.
-RENDER_MODES = ("auto",) + tuple(MODES)
+def render_modes() -> tuple[str, ...]:
+    """What :func:`mitsuba_mrt.render` takes as ``mode``: ``auto`` (a measured
+    plan, :mod:`mitsuba_mrt.renderer.auto`, which may run any of the others or
+    a full render) and every reconstruction of :data:`MODES` (as it is now)."""
+    return ("auto",) + tuple(MODES)
 
 #: Modes that need a tracer (they trace pixels beyond the grid).
 TRACING_MODES = ("refine", "idpass")
@@ -54,8 +55,9 @@ OUTPUT_DENOISED_MODES = ("refine",)
 SMOOTHED_MODES = ("fast", "refine", "idpass")
 
 
-def check_mode(mode: str, choices: tuple[str, ...] = tuple(MODES)) -> str:
+def check_mode(mode: str, choices: tuple[str, ...] | None = None) -> str:
     """``mode`` if it is one of ``choices`` (default: :data:`MODES`), else MRTError."""
+    choices = tuple(MODES) if choices is None else choices
     if mode not in choices:
         raise MRTError(f"unknown mode {mode!r}; choose one of {', '.join(choices)}")
     return mode

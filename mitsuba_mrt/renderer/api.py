@@ -20,7 +20,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError
-from ..modes import RENDER_MODES, check_mode
+from ..modes import check_mode, render_modes
 from ..modes.plan import Plan
 from ..recon.compose import region_values
 from ..recon.denoise import denoise_image
@@ -146,7 +146,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     """
     start = time.perf_counter()
     wrapper = unwrap(scene, integrator)
-    mode = check_mode(mode or wrapper.mode or "auto", RENDER_MODES)
+    mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
     sensor = resolve_sensor(scene, sensor)
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
