@@ -157,7 +157,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
-            outcome = auto.run_auto(scene, pattern, tracer, params, start, progress=progress)
+            outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
             plan = outcome.plan
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
@@ -168,7 +168,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
                                 Timings(check=plan.pilot_s, full_render=seconds), start)
         if choice.kind == "denoised":  # the passes again, now without a way out
             outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
-                                    progress=progress)
+                                    on_round=progress)
             outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
             return _passes_result(outcome, tracer, params, start)
         mode = choice.mode

@@ -75,12 +75,12 @@ def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
 
 
 def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
-             started: float, escape: bool = True, progress=None) -> AutoOutcome:
+             started: float, escape: bool = True, on_round=None) -> AutoOutcome:
     """The plan of the module; the image too where the passes made it.
 
     ``started`` is the render's ``time.perf_counter()`` at its start: a time
     limit is counted from it.  Without ``escape`` the passes run to the
-    target whatever the first round predicts.  ``progress(stage, done)``
+    target whatever the first round predicts.  ``on_round(stage, done)``
     hears of every round of passes.
     """
     spp, limit = tracer.spp, params.time_limit
@@ -117,13 +117,13 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         tracer, width, height, quality=params.denoise_quality,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=spp * (LIMIT_SPP_FACTOR if limit is not None else 1), full_spp=spp, area=area,
-        denoise=denoise, stop_early=stop_early if escape else None, on_round=progress)
+        denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round)
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
                            seconds=progress.trace_s + progress.denoise_s,
                            error=progress.predicted)
-        plan = Plan(choice, f"denoised passes: {progress.stopped}",
+        plan = Plan(choice, f"{'denoised ' if denoise else ''}passes: {progress.stopped}",
                     target_error=params.noise_threshold or (
                         None if limit is not None else progress.full_error),
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
