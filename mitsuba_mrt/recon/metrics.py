@@ -73,3 +73,24 @@ def edge_mask(ids: np.ndarray) -> np.ndarray:
         edge[a] |= differ
         edge[b] |= differ
     return edge
+
+
+def relative_error(squared: np.ndarray, reference: np.ndarray) -> float:
+    """Root of the mean of ``squared`` (n, 3) over the pixels a display shows
+    unclipped (``reference`` below 1), over the mean square of ``reference``
+    there: ``auto``'s relative RMS error, of squared errors that may have been
+    estimated (a noise subtracted: a negative mean counts as 0).
+
+    ``reference`` should be free of fireflies (a denoised image): a noisy
+    one leaves its noisiest pixels out, and the noise with them.
+
+    Examples
+    --------
+    >>> relative_error(np.full((2, 3), 0.01), np.full((2, 3), 0.5))
+    0.2
+    """
+    shown = (reference <= 1.0).all(axis=1)
+    if not shown.any():
+        return 0.0
+    power = max(float(np.mean(reference[shown] ** 2)), 1e-12)
+    return float(np.sqrt(max(float(np.mean(squared[shown])), 0.0) / power))

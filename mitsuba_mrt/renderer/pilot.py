@@ -35,6 +35,7 @@ import numpy as np
 
 from ..modes.plan import Candidate
 from ..recon.denoise import denoise_image, oidn_available
+from ..recon.metrics import relative_error
 from ..recon.sampling import SamplePattern
 from ..runtime.jit import compile_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
@@ -219,8 +220,7 @@ class Reference:
     """The pilot's reference of the strips, and errors measured against it.
 
     ``a`` and ``b`` are its two independent halves, ``mean`` both together;
-    ``variance`` a single sample's per pixel; ``shown`` the pixels whose
-    reference is below 1 in every channel; ``power`` the mean square there.
+    ``variance`` a single sample's per pixel.
     """
 
     a: np.ndarray
@@ -229,23 +229,17 @@ class Reference:
     spp_a: int
     spp_b: int
     variance: np.ndarray
-    shown: np.ndarray
-    power: float
 
     @classmethod
     def of(cls, a: SparseTrace, b: SparseTrace) -> "Reference":
         mean = (a.radiance * a.spp + b.radiance * b.spp) / (a.spp + b.spp)
         variance = 0.5 * (a.variance + b.variance)
-        shown = (mean <= 1.0).all(axis=1)
-        power = float(np.mean(mean[shown] ** 2)) if shown.any() else 1.0
-        return cls(a.radiance, b.radiance, mean, a.spp, b.spp, variance, shown,
-                   max(power, 1e-12))
+        return cls(a.radiance, b.radiance, mean, a.spp, b.spp, variance)
 
     def relative(self, squared: np.ndarray) -> float:
-        """The relative RMS error of per-pixel squared errors (n, 3)."""
-        if not self.shown.any():
-            return 0.0
-        return float(np.sqrt(max(float(np.mean(squared[self.shown])), 0.0) / self.power))
+        """The relative RMS error of per-pixel squared errors (n, 3)
+        (:func:`mitsuba_mrt.recon.metrics.relative_error`)."""
+        return relative_error(squared, self.mean)
 
     def full_error(self, spp: int, area: float) -> float:
         """A full render's error at ``spp``: its noise."""

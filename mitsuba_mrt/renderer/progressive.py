@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..recon.denoise import denoise_image
+from ..recon.metrics import relative_error
 from ..types import SeedStream
 
 #: Passes of the first round (the fewest that give a variance and two halves).
@@ -197,21 +198,6 @@ def estimate_rows(height: int) -> np.ndarray:
     starts = [round((k + 0.5) * height / ESTIMATE_STRIPS - rows_each / 2)
               for k in range(ESTIMATE_STRIPS)]
     return np.concatenate([np.arange(s, s + rows_each) for s in starts])
-
-
-def relative_error(squared: np.ndarray, reference: np.ndarray) -> float:
-    """Root of the mean of ``squared`` (n, 3) over the pixels a display shows
-    unclipped (``reference`` below 1), over the mean square of ``reference``
-    there: the planner's relative RMS error.
-
-    ``reference`` should be free of fireflies (a denoised image): a noisy
-    one leaves its noisiest pixels out, and the noise with them.
-    """
-    shown = (reference <= 1.0).all(axis=1)
-    if not shown.any():
-        return 0.0
-    power = max(float(np.mean(reference[shown] ** 2)), 1e-12)
-    return float(np.sqrt(max(float(np.mean(squared[shown])), 0.0) / power))
 
 
 def run_passes(tracer, width: int, height: int, *, quality: str,
