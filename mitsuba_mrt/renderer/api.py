@@ -164,8 +164,8 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         choice = plan.choice
         if choice.kind == "full":
             image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, choice.spp, seed)
-            return _full_result(image, alpha, params, choice, plan,
-                                Timings(check=plan.pilot_s, full_render=seconds), start)
+            return _whole_image_result(image, alpha, params, choice.spp, plan,
+                                       Timings(check=plan.pilot_s, full_render=seconds), start)
         if choice.kind == "denoised":  # the passes again, now without a way out
             outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                                     on_round=progress)
@@ -235,19 +235,17 @@ def _passes_result(outcome: auto.AutoOutcome, tracer: GridTracer, params: MRTPar
     rgba = tracer.sensor.film().base_channels_count() == 4
     timings = Timings(trace=progress.trace_s, check=progress.estimate_s,
                       denoise=progress.denoise_s)
-    return MRTResult(image, np.zeros((height, width), dtype=np.int64),
-                     np.ones((height, width), dtype=bool), None, _empty_trace(progress.spp),
-                     params, progress.spp, "auto", plan.choice.name,
-                     timings.close(time.perf_counter() - start), auto=plan,
-                     traced=TracedCounts(full=width * height),
-                     alpha=outcome.alpha if rgba else None)
+    return _whole_image_result(image, outcome.alpha if rgba else None, params, progress.spp,
+                               plan, timings, start)
 
 
-def _full_result(image, alpha, params, choice, plan, timings, start) -> MRTResult:
+def _whole_image_result(image, alpha, params: MRTParams, spp: int, plan: Plan,
+                        timings: Timings, start: float) -> MRTResult:
+    """The result of an ``auto`` plan that traced every pixel (``plan.choice.name``)."""
     height, width = image.shape[:2]
     return MRTResult(image, np.zeros((height, width), dtype=np.int64),
-                     np.ones((height, width), dtype=bool), None, _empty_trace(choice.spp),
-                     params, choice.spp, "auto", "full",
+                     np.ones((height, width), dtype=bool), None, _empty_trace(spp),
+                     params, spp, "auto", plan.choice.name,
                      timings.close(time.perf_counter() - start), auto=plan,
                      traced=TracedCounts(full=height * width), alpha=alpha)
 
