@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..imageio import OutputSet
 from ..recon.metrics import paper_error
 
 #: spp of the alternative's ladder.
@@ -164,14 +165,20 @@ def verdicts(rows: list[Row]) -> list[dict]:
 
 
 def write_report(out_dir: Path, rows: list[Row], command: str) -> Path:
-    """``rival.csv``, ``rival.md`` (the verdict table) and ``rival.png`` into ``out_dir``."""
+    """``rival.csv``, ``rival.md`` (the verdict table) and ``rival.png`` into
+    ``out_dir``, together or not at all; returns the table's path."""
+    with OutputSet(out_dir) as out:  # the three files together or none
+        _write_files(out, rows, command)
+    return out_dir / "rival.md"
+
+
+def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / "rival.csv", "w", newline="") as f:
+    with open(out.path("rival.csv"), "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["scene", "method", "spp", "seconds", "relative_time", "error",
                          "rel_mse", "chose"])
@@ -190,7 +197,7 @@ def write_report(out_dir: Path, rows: list[Row], command: str) -> Path:
         lines.append(f"| {v['scene']} | {a.chose} | {a.relative_time:.2f} | {a.error:.4f} | "
                      f"{v['alternative']:.4f} | {a.error / v['alternative']:.2f} | "
                      f"{v['best']:.4f} | {limits} |")
-    (out_dir / "rival.md").write_text("\n".join(lines) + "\n")
+    Path(out.path("rival.md")).write_text("\n".join(lines) + "\n")
     scenes = list(dict.fromkeys(r.scene for r in rows))
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.0), squeeze=False)
     for ax, scene in zip(axes[0], scenes):
@@ -209,9 +216,8 @@ def write_report(out_dir: Path, rows: list[Row], command: str) -> Path:
     axes[0][0].set_ylabel("error (report's metric)")
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out_dir / "rival.png", dpi=90)
+    fig.savefig(out.path("rival.png"), dpi=90, format="png")
     plt.close(fig)
-    return out_dir / "rival.md"
 
 
 def run_rival(out_dir, scenes: list[tuple[str, str, dict]], repeats: int = 2,
