@@ -205,6 +205,16 @@ class SparseTrace:
 
 
 @dataclass
+class KernelCounts:
+    """Dr.Jit kernels that a render did not find in memory: ``compiled`` anew,
+    or loaded ``from_disk`` (Dr.Jit's on-disk cache of compiled kernels).
+    Their seconds are part of the stages that launched them."""
+
+    compiled: int = 0
+    from_disk: int = 0
+
+
+@dataclass
 class Timings:
     """Seconds spent per stage; ``other`` makes the parts add up to ``total``.
 
@@ -212,7 +222,8 @@ class Timings:
     render); ``trace_more`` every pixel traced beyond the grid (edges for
     ``refine``, the id pass and thin regions for ``idpass``); ``check``
     ``auto``'s pilot; ``full_render`` the full render that ``auto`` may
-    choose.
+    choose.  ``compile`` counts the kernels the render compiled (a count, not
+    seconds).
     """
 
     trace: float = 0.0
@@ -224,6 +235,7 @@ class Timings:
     full_render: float = 0.0
     other: float = 0.0
     total: float = 0.0
+    compile: KernelCounts = field(default_factory=KernelCounts)
 
     def close(self, total: float) -> "Timings":
         """Set ``total`` and put what the stages do not account for into ``other``."""

@@ -221,7 +221,8 @@ def summary_line(summary: RunSummary) -> str:
             f"{f' + denoise {t.denoise:.3f}' if t.denoise else ''}"
             f" + edges {t.edges:.3f} + interpolate {t.interpolate:.3f}"
             f"{f' + full render {t.full_render:.3f}' if t.full_render else ''}"
-            f" + other {t.other:.3f}")
+            f" + other {t.other:.3f}"
+            f"{f' ({t.compile.compiled} kernels compiled)' if t.compile.compiled else ''}")
     if s.error is not None:
         line += (f"; reference {s.reference_time_s:.3f} s ({s.relative_time:.2f}x), "
                  f"error {s.error:.5f}, PSNR {s.psnr_db:.2f} dB")

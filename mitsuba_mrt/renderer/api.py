@@ -25,8 +25,9 @@ from ..modes.plan import Plan
 from ..recon.compose import region_values
 from ..recon.denoise import denoise_image
 from ..recon.sampling import SamplePattern, grid_pattern
-from ..types import (MRTParams, SeedStream, Skips, SparseTrace, Timings, TracedCounts,
-                     check_radiance)
+from ..runtime.jit import counting_kernels
+from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
+                     TracedCounts, check_radiance)
 from . import auto
 from .lanes import is_jit
 from .pipeline import mrt_image
@@ -144,6 +145,16 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         Fields of :class:`MRTParams` (``sample_fraction=0.05``,
         ``time_limit=2.0`` ...).
     """
+    with counting_kernels() as counts:
+        result = _render(scene, integrator, sensor, spp, seed, params, mode, progress,
+                         param_overrides)
+    result.timings.compile = KernelCounts(*counts)
+    return result
+
+
+def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
+            param_overrides) -> MRTResult:
+    """:func:`render`'s work, its arguments as given."""
     start = time.perf_counter()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())

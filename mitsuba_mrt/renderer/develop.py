@@ -51,8 +51,9 @@ class _Developed:
     normal: np.ndarray | None = None  # (n, 3) the samples' mean shading normal
 
 
-def _camera_ray(sensor, sampler, position, spp: int, centre: bool = False):
-    """A camera ray through ``position`` (crop-relative pixel coordinates).
+def _camera_ray(sensor, sampler, position, spp, centre: bool = False):
+    """A camera ray through ``position`` (crop-relative pixel coordinates),
+    its differentials scaled for ``spp`` (an int, or a Dr.Jit value).
 
     ``centre`` rays use no random numbers: no aperture, time or wavelength
     sample.
@@ -66,7 +67,7 @@ def _camera_ray(sensor, sampler, position, spp: int, centre: bool = False):
     wavelength = sampler.next_1d() if (mi.is_spectral and not centre) else 0.0
     ray, weight = sensor.sample_ray_differential(ray_time, wavelength, position / film_size,
                                                  aperture)
-    ray.scale_differential(dr.rsqrt(float(spp)))
+    ray.scale_differential(dr.rsqrt(mi.Float(spp)))
     return ray, weight
 
 
@@ -193,7 +194,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
               float(table.radius), len(table.pdf), bool(box))
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(pixel_xy[:, 0]),
                     _aligned_float(pixel_xy[:, 1]), _aligned_float(table.cdf),
-                    dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), layout,
+                    dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if every:
         sums = sums.numpy().astype(np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
@@ -203,11 +204,16 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     return _read_sums(sums, pixel_xy)
 
 
-def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layout):
+def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
+                    layout):
     """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
     per pixel (a list of channels) or, for every pixel, as an image block's
     tensor.  Everything they depend on is an argument (``layout`` the Python
     values), so that :func:`drjit.freeze` can record and replay them.
+
+    The spp is also an opaque input (``spp_input``), not a literal: a kernel
+    compiled for one spp is the kernel of every other (only the sampler's
+    own arithmetic may bake it in: ``stratified``, ``multijitter``).
 
     The sampler is made here, not passed: a frozen function's inputs are
     also its outputs, and the sampler's state after the samples would cost
@@ -222,7 +228,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
     sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
-    owner = dr.arange(mi.UInt32, n * spp) // spp  # lanes pixel-major, as Mitsuba's own
+    owner = dr.arange(mi.UInt32, n * spp) // spp_input  # lanes pixel-major, as Mitsuba's own
 
     def offset(u):  # inverse CDF of the tabulated |filter|
         k = dr.binary_search(0, cells - 1, lambda i: dr.gather(mi.Float, cdf, i + 1) <= u)
@@ -243,7 +249,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, layo
         (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
     weight = dr.select(active, weight, 0.0)
 
-    ray, ray_weight = _camera_ray(sensor, sampler, position, spp)
+    ray, ray_weight = _camera_ray(sensor, sampler, position, mi.Float(spp_input))
     zero = mi.Float(0.0)
     rgb, alpha, invalid = mi.Color3f(0.0), zero, zero
     if integrator is not None:

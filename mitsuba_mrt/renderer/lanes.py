@@ -23,7 +23,15 @@ def logical_not(mask):
 
 
 def _to_numpy(value, width: int) -> np.ndarray:
-    """A Dr.Jit Color3f/Float as (width, 3)/(width,) numpy, literals broadcast."""
+    """A Dr.Jit Color3f/Float as (width, 3)/(width,) numpy, literals broadcast.
+
+    A 3-vector is read a component at a time: numpy's own conversion of it
+    launches a kernel that bakes ``width`` in, one kernel per pixel count.
+    """
+    if is_jit() and dr.depth_v(value) > 1:
+        dr.eval(value)
+        return np.stack([np.broadcast_to(np.asarray(c, dtype=np.float64), (width,))
+                         for c in value], axis=1)
     arr = np.asarray(value)
     if arr.ndim == 2:
         return np.broadcast_to(arr.T, (width, arr.shape[0])).astype(np.float64)

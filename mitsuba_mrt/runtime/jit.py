@@ -109,6 +109,32 @@ def jit_workers():
 
 
 @contextlib.contextmanager
+def counting_kernels():
+    """Yield a two-element list that holds, after the block, the kernels
+    Dr.Jit compiled inside it and those it loaded from its on-disk cache
+    (kernels found in memory count in neither).  Dr.Jit's launch counters
+    are only read: nothing is switched on or cleared.
+
+    Examples
+    --------
+    >>> with counting_kernels() as counts:
+    ...     pass
+    >>> counts
+    [0, 0]
+    """
+    import drjit as dr
+
+    stats = getattr(dr.detail, "launch_stats", None)  # (launches, soft misses, hard misses)
+    before = stats() if stats else (0, 0, 0)
+    counts = [0, 0]
+    try:
+        yield counts
+    finally:
+        after = stats() if stats else (0, 0, 0)
+        counts[:] = [after[2] - before[2], after[1] - before[1]]
+
+
+@contextlib.contextmanager
 def compile_seconds():
     """Yield a one-element list that holds, after the block, the seconds Dr.Jit
     spent compiling kernels inside it (kernels found in its caches cost none).

@@ -28,9 +28,11 @@ def test_render_writes_every_output(tmp_path):
     assert summary["sample_fraction"] == 0.2
     timings = summary["timings"]
     assert set(timings) == {"trace", "trace_more", "check", "denoise", "edges", "interpolate",
-                            "full_render", "other", "total"}
-    # the parts add up to the total
-    assert sum(v for k, v in timings.items() if k != "total") == pytest.approx(timings["total"])
+                            "full_render", "other", "total", "compile"}
+    # the parts add up to the total; beside them, the kernels the render did not have
+    assert sum(v for k, v in timings.items() if k not in ("total", "compile")) == pytest.approx(
+        timings["total"])
+    assert set(timings["compile"]) == {"compiled", "from_disk"}
     assert summary["traced"]["grid"] > 0 and summary["traced"]["more"] > 0  # refine's edges
     for key in ("variant", "why", "reference_time_s", "error", "psnr_db", "params"):
         assert key in summary

@@ -20,6 +20,15 @@ def test_summary_line_names_every_part_of_the_time_that_was_spent():
     assert line.endswith("+ other 0.060 [llvm_ad_rgb]")
 
 
+def test_summary_line_counts_the_kernels_compiled_only_when_there_were_some():
+    from mitsuba_mrt.types import KernelCounts
+
+    timings = Timings(trace=0.5, compile=KernelCounts(compiled=3, from_disk=2)).close(1.0)
+    assert "+ other 0.500 (3 kernels compiled) [" in summary_line(summary(timings))
+    timings.compile = KernelCounts(compiled=0, from_disk=2)
+    assert "compiled" not in summary_line(summary(timings))
+
+
 def test_summary_line_leaves_out_the_parts_a_run_did_not_have():
     line = summary_line(summary(Timings(trace=0.5, interpolate=0.1).close(1.0)))
     assert "pilot" not in line and "denoise" not in line and "full render" not in line

@@ -151,3 +151,17 @@ def test_a_dropped_scene_is_let_go_and_a_held_one_kept():
     assert any(o is other for o in held())
     assert any(o is kept for o in held())  # its caller still holds it
     assert all(o is other for o in held() if id(o) == dropped)  # (other may reuse its id)
+
+
+@pytest.mark.parametrize("mode", ["fast", "refine", "idpass", "paper"])
+def test_another_spp_compiles_no_kernel(mode):
+    # spp is a kernel input, not a literal: a second render at another spp
+    # replays or reuses every kernel of the first (independent sampler: the
+    # stratified and multijitter samplers' arithmetic bakes their count in)
+    scene = mi.load_string(PATH_SCENE.replace(
+        '<sampler type="stratified">', '<sampler type="independent">').replace(
+        '<boolean name="jitter" value="false"/>', ''))
+    mitsuba_mrt.render(scene, mode=mode, spp=3, sample_fraction=0.2)
+    second = mitsuba_mrt.render(scene, mode=mode, spp=5, sample_fraction=0.2)
+    assert (second.timings.compile.compiled, second.timings.compile.from_disk) == (0, 0)
+    assert second.spp == 5
