@@ -24,6 +24,7 @@ import numpy as np
 from .lanes import is_jit, logical_not
 from .pixel_filter import filter_table
 from .replay import Replay
+from .scene_query import has_delta_lobes
 
 #: Specular (mirror) bounces followed: by a sample's albedo (:func:`_albedo_along`)
 #: and by the id trace (:mod:`.ids`).
@@ -80,13 +81,13 @@ def _rgb(value, wavelengths, active=True):
     return mi.Color3f(value)
 
 
-def _albedo_along(scene, sampler, ray, active):
+def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
     """What multiplies the light arriving at the first hit: its BSDF's albedo
     for the view direction, one BSDF sample's weight, clamped to [0, 1] (RGB);
     with whether the camera ray hit and the shading normal at its hit.
 
     Through mirrors and glass (delta BSDFs) the path is followed, up to
-    ``MIRROR_DEPTH`` bounces, and the albedo is that of the surface seen
+    ``bounces`` (0 in a scene without delta lobes), and the albedo is that of the surface seen
     times the specular throughput; 0 on a miss.  The mean over a pixel's
     samples estimates the pixel's albedo the way its radiance is estimated.
     """
@@ -95,7 +96,7 @@ def _albedo_along(scene, sampler, ray, active):
     ray = mi.Ray3f(ray)
     active = mi.Bool(active) if is_jit() else bool(active)
     hit, normal = None, None
-    for depth in range(MIRROR_DEPTH + 1):
+    for depth in range(bounces + 1):
         si = scene.ray_intersect(ray, active)
         valid = active & si.is_valid() if is_jit() else bool(active and si.is_valid())
         if depth == 0:
@@ -109,7 +110,7 @@ def _albedo_along(scene, sampler, ray, active):
                                  sampler.next_2d(valid), valid)
         weight = dr.clip(_rgb(weight, si.wavelengths, valid), 0.0, 1.0)
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-        done = valid & (bs.pdf > 0.0) & (logical_not(delta) if depth < MIRROR_DEPTH else True)
+        done = valid & (bs.pdf > 0.0) & (logical_not(delta) if depth < bounces else True)
         albedo = dr.select(done, throughput * weight, albedo)
         if not is_jit() and done:
             break
@@ -191,7 +192,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
-              float(table.radius), len(table.pdf), bool(box))
+              float(table.radius), len(table.pdf), bool(box),
+              MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0)
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(pixel_xy[:, 0]),
                     _aligned_float(pixel_xy[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
@@ -220,7 +222,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     a second kernel over every lane to write back.
     """
     (n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells,
-     box) = layout
+     box, bounces) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
     cell = 2.0 * radius / cells
@@ -261,7 +263,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
         alpha = dr.select(active & valid, 1.0, 0.0)
     a_weight, a_rgb, normal = zero, mi.Color3f(0.0), mi.Vector3f(0.0)
     if albedo:  # averaged over the samples that hit a surface
-        a_rgb, hit, normal = _albedo_along(scene, sampler, ray, active)
+        a_rgb, hit, normal = _albedo_along(scene, sampler, ray, active, bounces)
         a_weight = dr.select(active & hit, weight, 0.0)
     values = [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,

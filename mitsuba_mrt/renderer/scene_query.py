@@ -29,6 +29,16 @@ def has_mirrors(scene: mi.Scene) -> bool:
     return any(shows(scene, lambda shape: _is_mirror_bsdf(shape.bsdf()), any))
 
 
+def has_delta_lobes(scene: mi.Scene) -> bool:
+    """True if a shape of ``scene`` has a BSDF that may sample a delta lobe
+    (a mirror, glass, a smooth coating): a sample's albedo follows those
+    bounces (:func:`~mitsuba_mrt.renderer.develop._albedo_along`)."""
+    def delta(bsdf) -> bool:
+        return bsdf is not None and mi.has_flag(int(bsdf.flags()), mi.BSDFFlags.Delta)
+
+    return any(shows(scene, lambda shape: delta(shape.bsdf()), any))
+
+
 def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:
     """Per shape in :func:`ordered_shapes` order, ``combine`` (``any`` or
     ``all``) of ``test`` over the shapes whose BSDFs it shows.

@@ -1,5 +1,6 @@
 import mitsuba as mi
 import numpy as np
+import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import edge_mask, error_map
@@ -106,3 +107,16 @@ def test_instances_show_their_own_groups_bsdfs(variant):
     assert diffuse_shapes(scene)[1:].tolist() == [n.startswith("a_") for n in names]
     assert curved_mirror_indices(scene).tolist() == [k + 1 for k, n in enumerate(names)
                                                      if n.startswith("b_")]
+
+
+@pytest.mark.parametrize("bsdf, delta", [('<bsdf type="diffuse"/>', False),
+                                         ('<bsdf type="roughconductor"/>', False),
+                                         ('<bsdf type="conductor"/>', True),
+                                         ('<bsdf type="dielectric"/>', True),
+                                         ('<bsdf type="plastic"/>', True)])
+def test_a_scene_has_delta_lobes_where_a_bsdf_may_sample_one(variant, bsdf, delta):
+    # a sample's albedo follows delta bounces only in scenes that have them
+    from mitsuba_mrt.renderer.scene_query import has_delta_lobes
+
+    extra = f'<shape type="cube">{bsdf}</shape>'
+    assert has_delta_lobes(mi.load_string(small_scene_xml(16, extra=extra))) is delta
