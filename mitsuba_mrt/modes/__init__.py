@@ -17,7 +17,6 @@ from ..recon.bounds import suppress_fireflies
 from ..recon.compose import demodulate, safe_albedo
 from ..recon.sampling import SamplePattern
 from ..recon.smooth import smooth_grid
-from ..runtime.jit import jit_workers_parked
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer, check_radiance
 from .baselines import bicubic_reconstruct, nearest_reconstruct
 from .fast import fast_reconstruct
@@ -99,12 +98,10 @@ def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = 
     if shapes != ((n, 3), (n, 3), (n,), (n,)):
         raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
     check_radiance(trace.radiance)
-    # none of Dr.Jit's workers busy-waits beside numpy (on images big enough to matter)
-    with jit_workers_parked(pattern.width * pattern.height):
-        start = time.perf_counter()
-        smoothed = smoothed_trace(pattern, trace, params, mode)
-        seconds = time.perf_counter() - start
-        recon = MODES[mode](pattern, smoothed, params, tracer)
+    start = time.perf_counter()
+    smoothed = smoothed_trace(pattern, trace, params, mode)
+    seconds = time.perf_counter() - start
+    recon = MODES[mode](pattern, smoothed, params, tracer)
     if smoothed is not trace:  # traced pixels keep what was traced
         pattern.put_traced(recon.image, trace.radiance)
         recon.timings.interpolate += seconds

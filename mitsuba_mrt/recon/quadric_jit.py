@@ -16,7 +16,6 @@ import functools
 
 import numpy as np
 
-from ..runtime.jit import jit_workers
 
 #: Basis of the quadric, as powers (of x, of y) of the offsets from the cell's centre.
 _POWERS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
@@ -61,9 +60,8 @@ def quadric_values_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
     fitted to.  Returns float32 values (m, C); a group without any sample of
     its id gives 0.
     """
-    with jit_workers():  # two kernels: on all cores, then the workers are parked again
-        return _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y,
-                               centre_x, spacing, ridge, member, py, px)
+    return _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y,
+                           centre_x, spacing, ridge, member, py, px)
 
 
 def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x,

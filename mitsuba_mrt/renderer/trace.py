@@ -16,7 +16,6 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError
-from ..runtime.jit import jit_workers
 from ..types import SparseTrace
 from .develop import _develop_jit, _develop_scalar, _Developed
 from .ids import _ids_jit, _ids_scalar
@@ -101,23 +100,22 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     spp = sampler.sample_count()
     replay = replay and is_jit() and replayable(scene)
     zero = np.zeros(n, np.int64)
-    with jit_workers():  # all of Dr.Jit's threads, also inside a reconstruction
-        develop = _develop_jit if is_jit() else _develop_scalar
-        if radiance:
-            samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs,
-                              replay, box)
-        elif aovs:
-            sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
-            samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
-                              seed, True, replay, box)
-        if aovs and ids:
-            shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
-                scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
-        elif aovs:
-            shape_index, visible, path_id = zero, np.zeros(n, np.uint32), zero
-            normal = samples.normal
-        else:
-            shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
+    develop = _develop_jit if is_jit() else _develop_scalar
+    if radiance:
+        samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs,
+                          replay, box)
+    elif aovs:
+        sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
+        samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
+                          seed, True, replay, box)
+    if aovs and ids:
+        shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
+            scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
+    elif aovs:
+        shape_index, visible, path_id = zero, np.zeros(n, np.uint32), zero
+        normal = samples.normal
+    else:
+        shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if not (radiance or aovs):
         samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)))
     if aovs and ids:  # only a surface seen at the pixel's centre is demodulated

@@ -4,11 +4,10 @@ The LLVM backend needs a system libLLVM 17 or newer: with 15 or 16 the JIT
 aborts the whole process on its first kernel, which no ``try`` can catch,
 so :func:`llvm_usable` asks Dr.Jit which libLLVM it loaded first.
 
-Dr.Jit's own pool lets its workers poll for work for a while after every
-kernel before they sleep, competing with numpy code that runs next.
-:func:`jit_workers_parked` stops those workers while the reconstruction's
-numpy code runs, and :func:`jit_workers` brings them back for a burst of
-kernels.
+Dr.Jit's thread pool is left as the host set it: its idle workers do not
+slow the reconstruction's numpy code measurably (docs/BENCHMARKS.md), and
+resizing the pool around every reconstruction once hung a process.
+:func:`counting_kernels` and :func:`compile_seconds` watch what Dr.Jit compiles.
 """
 
 from __future__ import annotations
@@ -44,68 +43,6 @@ def cuda_usable() -> bool:
         return bool(dr.has_backend(dr.JitBackend.CUDA))
     except Exception:  # noqa: BLE001
         return False
-
-
-#: Dr.Jit thread counts that the open :func:`jit_workers_parked` blocks
-#: replaced with 1 (their own worker-less count), innermost last.
-_parked_counts: list[int] = []
-
-#: Images smaller than this are reconstructed without parking the workers:
-#: their numpy stages are short, and every resize of Dr.Jit's pool risks a
-#: lost wake-up in its thread pool (a hang, seen once in a thorough stress run).
-PARK_MIN_PIXELS = 256 * 256
-
-
-@contextlib.contextmanager
-def jit_workers_parked(pixels: int | None = None):
-    """Run the block with Dr.Jit's worker threads stopped, then restore them;
-    for an image of fewer than :data:`PARK_MIN_PIXELS` ``pixels``, leave them.
-
-    Inside, a Dr.Jit kernel runs on the calling thread alone, unless it is
-    wrapped in :func:`jit_workers`; nobody busy-waits beside numpy.  The
-    thread count the caller had (``drjit.thread_count()``) is restored on
-    exit, also after an exception.
-
-    Examples
-    --------
-    >>> import drjit as dr
-    >>> before = dr.thread_count()
-    >>> with jit_workers_parked():
-    ...     dr.thread_count()
-    1
-    >>> dr.thread_count() == before
-    True
-    """
-    import drjit as dr
-
-    count = dr.thread_count()
-    park = count > 1 and (pixels is None or pixels >= PARK_MIN_PIXELS)
-    if park:
-        dr.set_thread_count(1)
-    _parked_counts.append(count if park else 1)  # unparked: jit_workers has nothing to do
-    try:
-        yield
-    finally:
-        _parked_counts.pop()
-        if park:
-            dr.set_thread_count(count)
-
-
-@contextlib.contextmanager
-def jit_workers():
-    """Inside :func:`jit_workers_parked`: Dr.Jit's workers for one burst of
-    kernels (a trace, a fit), stopped again after it; elsewhere a no-op."""
-    count = _parked_counts[-1] if _parked_counts else 1
-    if count <= 1:
-        yield
-        return
-    import drjit as dr
-
-    dr.set_thread_count(count)
-    try:
-        yield
-    finally:
-        dr.set_thread_count(1)
 
 
 @contextlib.contextmanager

@@ -2,10 +2,9 @@ import numpy as np
 import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
-from mitsuba_mrt.modes import fast as fast_mode
 from mitsuba_mrt.recon import quadric_jit as fast_jit
 from mitsuba_mrt.recon import within_region as fast
-from mitsuba_mrt.runtime import jit, threads
+from mitsuba_mrt.runtime import threads
 from mitsuba_mrt.recon.compose import ALBEDO_EPS, albedo_constant_per_id
 from mitsuba_mrt.recon.edges import id_boxes, quadtree_fill, region_boxes, smooth_ids
 from mitsuba_mrt.recon.within_region import interpolate_within_ids, local_poly_fit, separable_cubic
@@ -215,61 +214,6 @@ def test_worker_errors_come_out_of_the_result(monkeypatch):
     monkeypatch.setattr(threads, "_pool", lambda: (None, 1))
     with pytest.raises(np.linalg.LinAlgError):
         threads.beside(np.linalg.cholesky, -np.eye(2)).result()
-
-
-@pytest.fixture
-def three_jit_threads():
-    import drjit as dr
-
-    before = dr.thread_count()
-    dr.set_thread_count(3)
-    yield 3
-    dr.set_thread_count(before)
-
-
-def test_jit_workers_parked_then_restored(three_jit_threads):
-    import drjit as dr
-
-    with pytest.raises(ZeroDivisionError):
-        with jit.jit_workers_parked():
-            assert dr.thread_count() == 1
-            with jit.jit_workers():
-                assert dr.thread_count() == three_jit_threads
-            assert dr.thread_count() == 1
-            1 / 0
-    assert dr.thread_count() == three_jit_threads
-    with jit.jit_workers():  # not parked: nothing to do
-        assert dr.thread_count() == three_jit_threads
-
-
-@pytest.mark.skipif(not fast_jit.available(), reason="needs Dr.Jit's LLVM backend")
-def test_reconstruction_parks_jit_workers_but_fits_get_them(three_jit_threads, monkeypatch):
-    # Dr.Jit's idle workers busy-wait beside numpy: parked while the ids are
-    # smoothed, back for the fit kernels, and the caller's count is restored
-    import drjit as dr
-
-    seen = {}
-
-    def spy(name, function):
-        def wrapped(*args, **kwargs):
-            seen[name] = dr.thread_count()
-            return function(*args, **kwargs)
-        return wrapped
-
-    monkeypatch.setattr(fast_mode, "smooth_ids", spy("smoothing", fast_mode.smooth_ids))
-    monkeypatch.setattr(fast_jit, "_quadric_values", spy("fits", fast_jit._quadric_values))
-    p = grid_pattern(48, 40, 0.15)
-    shapes = 1 + (p.pixel_xy[:, 0] > 20) + (p.pixel_xy[:, 1] > 25)
-    t = trace_from(p, np.random.default_rng(4).random((p.count, 3)), shape_index=shapes)
-    monkeypatch.setattr(jit, "PARK_MIN_PIXELS", 48 * 40)  # this image counts as big
-    reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
-    assert seen == {"smoothing": 1, "fits": three_jit_threads}
-    assert dr.thread_count() == three_jit_threads
-    # a smaller image is not worth a resize of Dr.Jit's pool: the workers stay
-    monkeypatch.setattr(jit, "PARK_MIN_PIXELS", 48 * 40 + 1)
-    seen.clear()
-    reconstruct(p, t, MRTParams(id_rule="exact"), mode="fast")
-    assert seen == {"smoothing": three_jit_threads, "fits": three_jit_threads}
 
 
 @pytest.mark.parametrize("seed", range(4))
