@@ -17,7 +17,7 @@ import uuid
 from contextlib import contextmanager
 
 from ..errors import MRTError, one_line
-from ..runtime import configure
+from ..runtime import configure, threads
 
 #: The one-line error without the extra installed (``{command}``: batch, bench).
 DASK_MISSING = "the {command} command needs Dask: pip install mitsuba-mrt[batch]"
@@ -80,9 +80,10 @@ def cluster_client(scheduler: str | None, workers: int | None, echo):
     n = workers or _cores()
     jit_threads = max(1, _cores() // n)
     # a free port on this machine only; without bokeh the page says to install it
-    cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                       dashboard_address="127.0.0.1:0",
-                                       silence_logs=logging.ERROR)
+    with _environment(worker_environment(jit_threads)):  # what the workers start with
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           dashboard_address="127.0.0.1:0",
+                                           silence_logs=logging.ERROR)
     try:
         client = distributed.Client(cluster, set_as_default=False)
         try:
@@ -94,6 +95,41 @@ def cluster_client(scheduler: str | None, workers: int | None, echo):
             client.close()
     finally:
         cluster.close()
+
+
+#: The BLAS libraries' thread counts, which they read when they are loaded.
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def worker_environment(threads: int) -> dict[str, str]:
+    """The environment a local worker process starts with: its BLAS threads
+    its share of the cores (Dask's default is one each, whatever the share).
+
+    Examples
+    --------
+    >>> worker_environment(2)["OPENBLAS_NUM_THREADS"]
+    '2'
+    """
+    return {name: str(threads) for name in BLAS_THREADS}
+
+
+@contextmanager
+def _environment(values: dict[str, str]):
+    """``os.environ`` with ``values`` inside the block, as it was after it.
+
+    Dask's worker processes inherit this process's environment, and its own
+    defaults for them (one BLAS thread) give way to a variable set here.
+    """
+    before = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def _dashboard(client) -> str:
@@ -124,7 +160,9 @@ def _remote_jit_threads(client) -> dict[str, int]:
 
 
 def set_jit_threads(jit_threads) -> None:
-    """Dr.Jit's thread count for this worker: an int, or per worker address."""
+    """Dr.Jit's thread count and the package's pool
+    (:func:`mitsuba_mrt.runtime.threads.use_threads`) for this worker: its
+    share of the cores, an int or per worker address."""
     if isinstance(jit_threads, dict):
         try:
             jit_threads = jit_threads.get(require_distributed().get_worker().address)
@@ -135,6 +173,7 @@ def set_jit_threads(jit_threads) -> None:
 
         if dr.thread_count() != jit_threads:
             dr.set_thread_count(int(jit_threads))
+        threads.use_threads(int(jit_threads))
 
 
 def _call_on_worker(fn, args: tuple, jit_threads):

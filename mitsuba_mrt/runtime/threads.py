@@ -2,7 +2,8 @@
 
 ``cdist``, numpy's ufuncs and scipy's filters drop the GIL while they work,
 so plain threads run them side by side.  One pool serves the package; it is
-created on first use.
+created on first use, one thread per core unless :func:`use_threads` says
+fewer.
 """
 
 from __future__ import annotations
@@ -14,16 +15,46 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 
 
+#: Threads the pool is limited to (:func:`use_threads`); None: one per core.
+_limit: list[int | None] = [None]
+
+
+def cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 @functools.cache
 def _pool() -> tuple[ThreadPoolExecutor | None, int]:
-    """The package's thread pool and its size (None: a single core)."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cores = os.cpu_count() or 1
-    workers = min(cores, 8)
+    """The package's thread pool and its size (None: a single thread)."""
+    workers = min(_limit[0] or cores(), 8)
     return (ThreadPoolExecutor(workers, thread_name_prefix="mitsuba-mrt") if workers > 1
             else None), workers
+
+
+def use_threads(count: int | None) -> None:
+    """Limit the pool to ``count`` threads (None: one per core), from the next call on.
+
+    A process that shares the machine with others of its kind (a Dask
+    worker beside other workers) takes its share of the cores.
+
+    Examples
+    --------
+    >>> use_threads(1); _pool()[1]
+    1
+    >>> use_threads(None)
+    """
+    if _limit[0] == count:
+        return
+    _limit[0] = count
+    if _pool.cache_info().currsize:
+        pool, _ = _pool()
+        _pool.cache_clear()
+        if pool is not None:
+            pool.shutdown(wait=False)
 
 
 def for_row_blocks(function, rows: int, min_rows: int = 512,

@@ -325,3 +325,22 @@ def test_killed_worker_loses_no_frame(remote_cluster, tmp_path):
     for row in result.rows:
         assert (out / row["task"] / "paper_fig1_orbit_mrt.exr").exists()
         assert not list((out / row["task"]).glob(".*"))  # the leftover was removed
+
+
+def worker_threads() -> tuple:
+    """On a worker: Dr.Jit's threads, the package pool's, and what BLAS was told."""
+    import drjit as dr
+
+    from mitsuba_mrt.runtime import threads
+
+    return dr.thread_count(), threads._pool()[1], os.environ.get("OPENBLAS_NUM_THREADS")
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_local_workers_threads_are_its_share_of_the_cores(workers):
+    from mitsuba_mrt.app.cluster import cluster_map
+
+    share = max(1, (os.cpu_count() or 1) // workers)
+    with cluster_map(workers=workers, echo=lambda line: None) as map_calls:
+        seen = {result for _, result in map_calls(worker_threads, [()] * (2 * workers))}
+    assert seen == {(share, min(share, 8), str(share))}
