@@ -120,25 +120,28 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
     return albedo, hit, normal
 
 
-def _read_sums(sums: np.ndarray, pixel_xy: np.ndarray) -> _Developed:
-    """The developed values of the traced pixels from their filter-weighted sums."""
+def _read_sums(sums: np.ndarray, radiance: bool = True) -> _Developed:
+    """The developed values of the traced pixels from their filter-weighted
+    sums; without ``radiance`` (an albedo-only trace) its fields are zero."""
     def reciprocal(weight):  # 0 where nothing was accumulated
         out = np.zeros_like(weight)
         np.divide(1.0, weight, out=out, where=weight != 0.0)
         return out
 
+    per_albedo_weight = reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
+    albedo = np.clip(sums[:, 8:11] * per_albedo_weight, 0.0, 1.0)
+    normal = np.clip(sums[:, 13:16] * per_albedo_weight, -1.0, 1.0)
+    if not radiance:
+        n = len(sums)
+        return _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), albedo, normal)
     per_weight = reciprocal(sums[:, 4])[:, None]
     radiance = sums[:, 0:3] * per_weight
     second = sums[:, 5:8] * per_weight
-    per_albedo_weight = reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
-    albedo = sums[:, 8:11] * per_albedo_weight
     radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
     variance = second - radiance ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)
     variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
-    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance,
-                      np.clip(albedo, 0.0, 1.0),
-                      np.clip(sums[:, 13:16] * per_albedo_weight, -1.0, 1.0))
+    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance, albedo, normal)
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -176,34 +179,41 @@ def _aligned_float(values: np.ndarray):
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
-                 box=False):
+                 box=False, sources=None):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
     splatted with the filter).  Some pixels: each from its own samples, placed
-    with the filter's distribution (:mod:`.pixel_filter`).  ``sampler`` is
-    :func:`_develop_scalar`'s; the kernels clone the sensor's own.
+    with the filter's distribution (:mod:`.pixel_filter`); or, given
+    ``sources``, the pixels whose samples are splatted as ``mi.render``'s
+    (every pixel within the filter's reach of ``pixel_xy``, for their values
+    to be ``mi.render``'s kind; pixels outside the image add nothing).
+    ``sampler`` is :func:`_develop_scalar`'s; the kernels clone the sensor's own.
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     table = filter_table(box_filter() if box else film.rfilter())
-    n = len(pixel_xy)
-    every = _every_pixel(pixel_xy, width, height)
+    every = sources is not None or _every_pixel(pixel_xy, width, height)
+    traced = pixel_xy if sources is None else sources
+    n = len(traced)
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0)
-    sums = _DEVELOP(scene, sensor, integrator, _aligned_float(pixel_xy[:, 0]),
-                    _aligned_float(pixel_xy[:, 1]), _aligned_float(table.cdf),
+    sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
+                    _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if every:
-        sums = sums.numpy().astype(np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
+        sums = sums.numpy().reshape(width * height, _CHANNELS)
+        index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
+        in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
+        sums = sums.astype(np.float64) if in_order else sums[index].astype(np.float64)
     else:
         sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
                          for total in sums], axis=1)  # (literal zeros broadcast)
-    return _read_sums(sums, pixel_xy)
+    return _read_sums(sums, integrator is not None)
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
@@ -298,17 +308,18 @@ def box_filter():
 
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                    replay=False, box=False):
+                    replay=False, box=False, sources=None):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     rfilter = box_filter() if box else film.rfilter()
     table = filter_table(rfilter)
-    every = _every_pixel(pixel_xy, width, height)
+    every = sources is not None or _every_pixel(pixel_xy, width, height)
+    traced = pixel_xy if sources is None else sources
     offset = mi.ScalarVector2f(film.crop_offset())
     block = _new_block(film, rfilter) if every else None
     sums = np.zeros((len(pixel_xy), _CHANNELS))
-    for k, (x, y) in enumerate(pixel_xy.tolist()):
+    for k, (x, y) in enumerate(traced.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
         for s in range(spp):
             u = sampler.next_2d()
@@ -344,7 +355,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             sampler.advance()
     if every:
         sums = np.array(block.tensor(), dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
-    return _read_sums(sums, pixel_xy)
+    return _read_sums(sums, integrator is not None)
 
 
 #: The samples' kernels, replayed from a recording when the same trace repeats.

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import MRTError
 from ..types import SparseTrace
+from .albedo_pass import albedo_pass
 from .develop import _develop_jit, _develop_scalar, _Developed
 from .ids import _ids_jit, _ids_scalar
 from .lanes import is_jit
@@ -24,11 +25,6 @@ from .replay import active as replay_active
 from .replay import padded_size
 from .scene_query import (_shape_lookup, curved_mirror_indices, replayable, shadow_rule,
                           tracked_lights)
-
-#: Samples per pixel of an albedo-only pass (the id pass).  A pixel traced
-#: with the nested integrator takes its albedo from all of its samples, the
-#: same ones as its radiance, so that the two see the same footprint.
-ALBEDO_SAMPLES = 16
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.  Dark
@@ -104,18 +100,15 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     if radiance:
         samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs,
                           replay, box)
-    elif aovs:
-        sampler.set_sample_count(min(spp, ALBEDO_SAMPLES))
-        samples = develop(scene, sensor, None, sampler, pixel_xy, sampler.sample_count(),
-                          seed, True, replay, box)
+    shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
             scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
-    elif aovs:
-        shape_index, visible, path_id = zero, np.zeros(n, np.uint32), zero
+    if aovs and not radiance:  # the id pass: albedo alone
+        samples = albedo_pass(develop, scene, sensor, sampler, pixel_xy, seed, replay, box,
+                              (shape_index, path_id) if ids else None)
+    if aovs and not ids:
         normal = samples.normal
-    else:
-        shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if not (radiance or aovs):
         samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)))
     if aovs and ids:  # only a surface seen at the pixel's centre is demodulated

@@ -238,9 +238,12 @@ def test_denoising_a_dark_texture_does_not_magnify_its_error(variant):
     assert diffuse_shapes(scene).tolist()[0] is False and diffuse_shapes(scene)[1:].all()
     converged = np.mean([mitsuba_mrt.render_reference(scene, spp=256, seed=100 + k)[0]
                          for k in range(2)], axis=0)
-    plain, denoised = (mitsuba_mrt.render(scene, mode="idpass", denoise=d)
-                       for d in ("none", "oidn"))
-    assert paper_error(denoised.image, converged) < paper_error(plain.image, converged)
+    # over seeds: at 8 spp denoising this floor costs about a tenth (a single
+    # seed may go either way); the bug it guards against multiplied it by 4
+    plain, denoised = (np.mean([paper_error(mitsuba_mrt.render(
+        scene, mode="idpass", denoise=d, seed=s).image, converged) for s in range(3)])
+        for d in ("none", "oidn"))
+    assert denoised < 1.25 * plain
 
 
 def test_refines_pixels_traced_beyond_the_grid_are_denoised_too(variant):

@@ -1,0 +1,141 @@
+"""The albedo of the id pass: every pixel, in two steps (Mitsuba-specific).
+
+The id pass (mode ``idpass``) gives every pixel of the image its albedo,
+without the nested integrator.  Inside a surface of one colour the albedo
+is the same at every sample, so one sample per pixel gives it exactly; only
+where it varies within a pixel's footprint (an edge between surfaces, a
+texture, a rough BSDF whose sampled weight varies) do the samples average
+to something else.  So every pixel is traced with one sample first, and the
+pixels near a change (of the surface seen at the pixels' centres, or of
+those single-sample albedos) again with :data:`ALBEDO_SAMPLES`, the count of
+a one-step pass, through the film's filter.  The first step develops its
+samples with a box filter (each in its own pixel): where the albedo is one,
+a filter changes nothing, and where it is not, the second step replaces it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from .develop import _Developed, _every_pixel
+from .pixel_filter import filter_table
+from .replay import active as replay_active
+from .replay import padded_size
+
+#: Samples per pixel of an albedo-only pass (the id pass), where the albedo
+#: varies.  A pixel traced with the nested integrator takes its albedo from
+#: all of its samples, the same ones as its radiance, so that the two see the
+#: same footprint.
+ALBEDO_SAMPLES = 16
+
+#: Albedos (per channel, in [0, 1]) that differ by less are one surface's:
+#: the weights of one diffuse BSDF are equal, their filtered means round apart.
+ALBEDO_TOLERANCE = 1e-4
+
+#: Added to the seed of the second step, so that its samples are not the
+#: first step's (the golden ratio's 32-bit constant).
+SECOND_SEED = 0x9E3779B9
+
+
+def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int,
+                replay: bool, box: bool, surface: tuple | None) -> _Developed:
+    """The albedo of ``pixel_xy``, traced without the nested integrator.
+
+    ``develop`` is :func:`~.develop._develop_jit` or its scalar twin;
+    ``sampler`` is at the trace's spp, of which at most
+    :data:`ALBEDO_SAMPLES` are taken.  ``surface`` is what the pixels'
+    centres see, (shape index, mirror path) per pixel, or None; with it, and
+    when ``pixel_xy`` is every pixel of the image, the pass takes two steps
+    (see the module), else one.
+    """
+    count = min(sampler.sample_count(), ALBEDO_SAMPLES)
+    width, height = (int(v) for v in sensor.film().crop_size())
+    if surface is None or count == 1 or not _every_pixel(pixel_xy, width, height):
+        sampler.set_sample_count(count)
+        return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box)
+    sampler.set_sample_count(1)
+    # each sample in its own pixel: where the albedo is one, the filter changes nothing
+    first = develop(scene, sensor, None, sampler, pixel_xy, 1, seed, True, replay, True)
+    reach = _reach(None if box else sensor.film().rfilter())
+    again = varied_pixels(pixel_xy, width, height, first.albedo, surface, reach)
+    if again.any():
+        # splatted as in a one-step pass, from every pixel whose samples reach them
+        mask = np.zeros((height, width), dtype=bool)
+        mask[pixel_xy[again, 1], pixel_xy[again, 0]] = True
+        sources = np.argwhere(ndimage.maximum_filter(mask, size=2 * reach + 1,
+                                                     mode="constant"))[:, ::-1]
+        sampler.set_sample_count(count)
+        second = _splatted(develop, scene, sensor, sampler, pixel_xy[again], sources, count,
+                           (seed + SECOND_SEED) & 0xFFFFFFFF, replay, box)
+        first.albedo[again] = second.albedo
+        first.normal[again] = second.normal
+    return first
+
+
+def _reach(rfilter) -> int:
+    """Pixels beyond its own that a pixel's samples reach through ``rfilter``
+    (None: the box filter, none)."""
+    if rfilter is None:
+        return 0
+    return max(0, math.ceil(float(filter_table(rfilter).radius) - 0.5))
+
+
+def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndarray,
+                  surface: tuple, reach: int) -> np.ndarray:
+    """(n,) bool: pixels near which the surface seen or the albedo changes.
+
+    Two neighbouring pixels differ where one of the ``surface`` keys (arrays
+    per pixel) differs, or an albedo channel by more than
+    :data:`ALBEDO_TOLERANCE`; both, and every pixel within ``reach + 1`` of
+    either, are marked: their samples (which reach ``reach`` pixels away)
+    may see more than one albedo.
+
+    Examples
+    --------
+    >>> xy = np.stack(np.meshgrid(np.arange(6), np.arange(1)), -1).reshape(-1, 2)
+    >>> shape = np.array([1, 1, 1, 2, 2, 2])
+    >>> varied_pixels(xy, 6, 1, np.full((6, 3), 0.5), (shape,), 0).astype(int).tolist()
+    [0, 1, 1, 1, 1, 0]
+    """
+    x, y = pixel_xy[:, 0], pixel_xy[:, 1]
+    changed = np.zeros((height, width), dtype=bool)
+
+    def mark(image: np.ndarray, differ) -> None:
+        across, down = differ(image[:, 1:], image[:, :-1]), differ(image[1:], image[:-1])
+        changed[:, 1:] |= across
+        changed[:, :-1] |= across
+        changed[1:] |= down
+        changed[:-1] |= down
+
+    def image_of(values: np.ndarray) -> np.ndarray:
+        image = np.zeros((height, width), dtype=values.dtype)
+        image[y, x] = values
+        return image
+
+    for key in surface:
+        mark(image_of(np.asarray(key)), np.not_equal)
+    for channel in range(albedo.shape[1]):
+        mark(image_of(albedo[:, channel]), lambda a, b: np.abs(a - b) > ALBEDO_TOLERANCE)
+    marked = ndimage.maximum_filter(changed, size=2 * reach + 3, mode="constant")
+    return marked[y, x]
+
+
+#: Where the padding of a set of source pixels is traced: far enough outside
+#: the image that no filter splats a sample of it into a pixel.
+OUTSIDE = -64
+
+
+def _splatted(develop, scene, sensor, sampler, pixel_xy, sources, count, seed, replay,
+              box) -> _Developed:
+    """``develop`` of ``pixel_xy`` from the samples of ``sources`` (a set whose
+    size changes from render to render): with ``replay``, ``sources`` padded
+    to :func:`~.replay.padded_size` with pixels outside the image, and replayed."""
+    replay = replay and replay_active()
+    if replay:
+        pad = np.full((padded_size(len(sources)) - len(sources), 2), OUTSIDE, dtype=np.int64)
+        sources = np.concatenate([sources, pad])
+    return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box,
+                   sources)

@@ -1,0 +1,71 @@
+"""The id pass's albedo in two steps: one sample per pixel, then the pixels where it varies."""
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from helpers import small_scene_xml
+from mitsuba_mrt.renderer import albedo_pass as ap
+from mitsuba_mrt.renderer.develop import _develop_jit, _develop_scalar
+from mitsuba_mrt.renderer.lanes import is_jit
+from mitsuba_mrt.renderer.trace import trace_pixels
+
+RES = 40
+CHECKER = ('<shape type="rectangle"><transform name="to_world"><scale value="3"/>'
+           '<translate z="0.5"/></transform><bsdf type="diffuse">'
+           '<texture type="checkerboard" name="reflectance"><rgb name="color0" value="0.1"/>'
+           '<rgb name="color1" value="0.9"/><transform name="to_uv"><scale value="4"/>'
+           '</transform></texture></bsdf></shape>')
+
+
+def _scene(filter_xml: str = '<rfilter type="gaussian"/>'):
+    xml = small_scene_xml(RES, extra=CHECKER).replace('<rfilter type="box"/>', filter_xml)
+    return mi.load_string(xml.replace('value="1"/><boolean name="jitter" value="false"/>',
+                                      'value="16"/>'))
+
+
+def _every():
+    return np.stack(np.meshgrid(np.arange(RES), np.arange(RES)), -1).reshape(-1, 2)
+
+
+def _id_pass(scene, spp, seed):
+    sensor = scene.sensors()[0]
+    return trace_pixels(scene, sensor, scene.integrator(), _every(), spp, seed,
+                        radiance=False, replay=True)
+
+
+def _one_step(scene, spp, seed):
+    sensor = scene.sensors()[0]
+    sampler = sensor.sampler().clone()
+    sampler.set_sample_count(spp)
+    develop = _develop_jit if is_jit() else _develop_scalar
+    return ap.albedo_pass(develop, scene, sensor, sampler, _every(), seed, True, False, None)
+
+
+@pytest.mark.parametrize("filter_xml", ['<rfilter type="gaussian"/>', '<rfilter type="box"/>'])
+def test_two_steps_are_as_close_to_the_converged_albedo_as_one(variant, filter_xml):
+    # the second step splats its samples as the one-step pass does: its pixels
+    # are as exact as a one-step pass's (a pixel developed from its own 16
+    # samples alone would be twice as far off through the gaussian filter)
+    scene = _scene(filter_xml)
+    if not is_jit():
+        pytest.skip("the scalar variant's pass is slow; the code path is the same")
+    converged = np.mean([_one_step(scene, 16, 100 + k).albedo for k in range(8)], axis=0)
+    two = np.mean([np.abs(_id_pass(scene, 16, s).albedo - converged).mean() for s in range(3)])
+    one = np.mean([np.abs(_one_step(scene, 16, s).albedo - converged).mean()
+                   for s in range(3)])
+    assert two < 1.25 * one
+
+
+def test_only_pixels_near_a_change_take_the_second_step(variant, monkeypatch):
+    scene = _scene()
+    marked = []
+    real = ap.varied_pixels
+    monkeypatch.setattr(ap, "varied_pixels", lambda *a: marked.append(real(*a)) or marked[-1])
+    trace = _id_pass(scene, 16, 0)
+    again = marked[-1]
+    assert 0 < again.mean() < 1
+    # a pixel left with its one sample sees one diffuse colour: its albedo is exact
+    flat = trace.albedo[~again & (trace.shape_index > 0)]
+    colours = {0.1, 0.9, 0.5, 0.8, 0.2}  # checker squares, floor, the sphere's channels
+    assert len(flat) and np.isin(np.round(flat, 5), list(colours)).all()
