@@ -360,12 +360,14 @@ class Tracer(Protocol):
     pass): its kernels are recorded once and replayed after.  ``pad`` says
     a set like it but of another size is traced on the next render
     (``refine``'s edges, thin regions): the set is padded to one of a few
-    sizes, whose kernels are recorded once and replayed after.
+    sizes, whose kernels are recorded once and replayed after.  Without
+    ``albedo`` the trace's albedo is zero (a set whose ids alone are used).
     """
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True,
-                 replay: bool = False, pad: bool = False) -> "SparseTrace": ...
+                 replay: bool = False, pad: bool = False,
+                 albedo: bool = True) -> "SparseTrace": ...
 
 
 def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:

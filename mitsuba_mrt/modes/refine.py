@@ -247,7 +247,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
         stats["curved_mirror_samples"] = int(curved.sum())
 
     def trace_ids(points):
-        more = tracer(points, stream=SeedStream.EDGES, pad=True)
+        more = tracer(points, stream=SeedStream.EDGES, pad=True, albedo=False)
         extra.append((points, more))
         if curved is None:
             return more.ids(rule)
@@ -267,7 +267,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
         rough = rough[~traced_before[rough[:, 1], rough[:, 0]]]
     stats["rough_cells"] = int(len(rows))
     if len(rough):
-        more = tracer(rough, stream=SeedStream.ROUGH, pad=True)
+        more = tracer(rough, stream=SeedStream.ROUGH, pad=True, albedo=False)
         extra.append((rough, more))
         refined[rough[:, 1], rough[:, 0]] = more.ids(rule)
     trace_s = sum(more.seconds for _, more in extra)

@@ -103,9 +103,11 @@ class GridTracer:
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
-                 pad: bool = False, box: bool = False, ids: bool = True) -> SparseTrace:
+                 pad: bool = False, box: bool = False, ids: bool = True,
+                 albedo: bool = True) -> SparseTrace:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
-                            self.seed + int(stream), aovs, radiance, replay, pad, box, ids)
+                            self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
+                            albedo)
 
 
 def _check_spp(spp: int | None) -> int | None:

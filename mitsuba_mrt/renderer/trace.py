@@ -36,7 +36,8 @@ ALBEDO_MIN = 0.001
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True, replay: bool = False,
-                 pad: bool = False, box: bool = False, ids: bool = True) -> SparseTrace:
+                 pad: bool = False, box: bool = False, ids: bool = True,
+                 albedo: bool = True) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -78,6 +79,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         With ``aovs``: also the ids (one ray through each pixel's centre), and
         the normal at that centre; without: no ids, and the normal of the
         samples' own first hits (a denoiser's guide, as their albedo is).
+    albedo : bool
+        With ``aovs`` and ``radiance``: also the samples' albedo; without, it
+        is zero and the samples cost what the integrator's alone do (for
+        pixels whose ids alone are used: ``refine``'s edges).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -87,7 +92,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         size = padded_size(n)
         padded = np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], size - n, axis=0)])
         return trace_pixels(scene, sensor, integrator, padded, spp, seed, aovs, radiance,
-                            replay=True, box=box, ids=ids).take(slice(0, n))
+                            replay=True, box=box, ids=ids, albedo=albedo).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
@@ -98,8 +103,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     zero = np.zeros(n, np.int64)
     develop = _develop_jit if is_jit() else _develop_scalar
     if radiance:
-        samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, aovs,
-                          replay, box)
+        samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed,
+                          aovs and albedo, replay, box)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(

@@ -89,7 +89,7 @@ def test_refine_traces_cells_whose_shading_the_grid_cannot_follow():
                            np.zeros(n, np.uint32), 0, 1, 0.0, variance=np.zeros((n, 3)))
 
     def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True, replay=False,
-               pad=False):
+               pad=False, albedo=True):
         return trace_at(xy)
 
     out = reconstruct(pattern, trace_at(pattern.pixel_xy), MRTParams(), "refine", tracer)
@@ -115,7 +115,7 @@ def test_refine_finds_edges_along_a_single_grid_row():
                            0.0)
 
     def tracer(xy, *, stream=SeedStream.EDGES, aovs=True, radiance=True, replay=False,
-               pad=False):
+               pad=False, albedo=True):
         return trace_at(xy)
 
     out = reconstruct(pattern, trace_at(pattern.pixel_xy), MRTParams(), "refine", tracer)

@@ -18,7 +18,8 @@ class FieldTracer:
         self.shapes = np.asarray(shapes, dtype=np.int64)
         self.albedo = np.ones(self.radiance.shape) if albedo is None else albedo
 
-    def __call__(self, xy, *, stream=None, aovs=True, radiance=True, replay=False, pad=False):
+    def __call__(self, xy, *, stream=None, aovs=True, radiance=True, replay=False, pad=False,
+                 albedo=True):
         r, c = xy[:, 1], xy[:, 0]
         n = len(xy)
         return SparseTrace(self.radiance[r, c] if radiance else np.zeros((n, 3)),

@@ -80,7 +80,7 @@ class Field:
             variance=(self.noise * values) ** 2 if radiance and self.noise else None)
 
     def tracer(self, pixel_xy, *, stream=None, aovs=True, radiance=True,
-               replay=False, pad=False) -> SparseTrace:
+               replay=False, pad=False, albedo=True) -> SparseTrace:
         """The modes' :class:`mitsuba_mrt.types.Tracer` (noise-free: ``stream`` is unused)."""
         return self.at(pixel_xy, aovs, radiance)
 
@@ -262,7 +262,8 @@ class Case:
                       f"f = {self!r}.field",
                       "shape_index, field, albedo = f.shape_index, f.radiance, f.albedo"]
         lines += [
-            "def tracer(xy, *, stream=None, aovs=True, radiance=True, replay=False, pad=False):",
+            "def tracer(xy, *, stream=None, aovs=True, radiance=True, replay=False, pad=False,",
+            "           albedo=True):",
             "    r, c = xy[:, 1], xy[:, 0]; n = len(xy)",
             "    return SparseTrace(field[r, c] if radiance else np.zeros((n, 3)),",
             "                       albedo[r, c] if aovs else np.zeros((n, 3)),",
