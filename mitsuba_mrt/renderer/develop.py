@@ -97,7 +97,8 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
     active = mi.Bool(active) if is_jit() else bool(active)
     hit, normal = None, None
     for depth in range(bounces + 1):
-        si = scene.ray_intersect(ray, active)
+        si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0,
+                                 active=active)
         valid = active & si.is_valid() if is_jit() else bool(active and si.is_valid())
         if depth == 0:
             hit = valid
