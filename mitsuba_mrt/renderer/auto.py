@@ -6,7 +6,8 @@ measure how good the denoised image gets, so the common case spends nothing
 on planning.  Under a time limit the passes fill it.  Without one they go
 on until the estimated error meets ``noise_threshold`` (default: the full
 render's own noise at the scene's spp, or the scene's spp), unless the scene
-is noise-free (a full render's error is 0) or, for a threshold asked for, a
+is noise-free (:func:`noise_free`, a probe before the passes: then the
+full render, which is exact) or, for a threshold asked for, a
 round (the third on) predicts that meeting it in passes costs more than a
 full render:
 then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the
@@ -19,7 +20,7 @@ where nothing is worth measuring.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mitsuba as mi
 import numpy as np
@@ -27,7 +28,7 @@ import numpy as np
 from ..modes.plan import Candidate, Plan, choose
 from ..recon.denoise import oidn_available
 from ..recon.sampling import SamplePattern
-from ..types import MRTParams
+from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
 from .progressive import Progress, needed_spp, run_passes
 
@@ -45,6 +46,8 @@ PASS_SAMPLES = 2.0
 CHECK_AFTER_ROUNDS = 3
 #: Under a time limit the passes may take up to this many times the scene's spp.
 LIMIT_SPP_FACTOR = 4
+#: Pixels of the probe that tells a noise-free scene (traced with two seeds).
+PROBE_PIXELS = 4096
 
 
 @dataclass
@@ -91,6 +94,11 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     if not denoise and limit is None:
         return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
                                 target_error=params.noise_threshold, notes=notes))
+    if escape and limit is None and params.noise_threshold is None and noise_free(
+            tracer, width, height):
+        return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
+                                "noise-free: the full render is exact", target_error=0.0,
+                                notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     costs = {}
@@ -130,6 +138,27 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     passes=list(progress.history))
         return AutoOutcome(plan, image, alpha, progress)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def noise_free(tracer, width: int, height: int) -> bool:
+    """Whether :data:`PROBE_PIXELS` pixels spread over the image come out the
+    same from two sets of random numbers (a deterministic scene: its full
+    render has no noise).
+
+    One small launch, before the passes: their first round, with its guides
+    and the denoiser's estimates, costs several full renders of such a scene.
+    """
+    count = width * height
+    index = np.arange(0, count, max(1, count // PROBE_PIXELS))[:PROBE_PIXELS]
+    xy = np.stack([index % width, index // width], axis=1)
+    # each pixel twice in one launch: a sampler draws other numbers for each lane
+    probe = replace(tracer, spp=min(tracer.spp, 2))(np.concatenate([xy, xy]),
+                                                    stream=SeedStream.PILOT, aovs=False,
+                                                    replay=True)
+    first, second = probe.radiance[:len(xy)], probe.radiance[len(xy):]
+    # (equal up to the order in which a pixel's samples were summed)
+    return bool(np.isfinite(probe.radiance).all()) and np.allclose(first, second, rtol=1e-5,
+                                                                   atol=1e-6)
 
 
 def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress, costs: dict,

@@ -143,13 +143,23 @@ def test_a_full_render_the_planner_chooses_is_mi_renders_own(scene, monkeypatch)
 
 
 def test_a_noise_free_scene_is_rendered_in_full(variant):
-    # matte has no noise: no denoised image meets a full render's error of 0
+    # matte has no noise: a probe before any pass tells, and the full render is exact
     scene = mi.load_string(scene_xml(512).replace(
         '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
         '<integrator type="matte"/>'))
     result = mitsuba_mrt.render(scene)
-    assert result.mode_used == "full" and "cost more than a full render" in result.auto.reason
+    assert result.mode_used == "full" and result.auto.reason.startswith("noise-free")
+    assert result.auto.passes == [] and result.timings.denoise == 0
     assert np.array_equal(result.image, mitsuba_mrt.render_reference(scene)[0])
+
+
+def test_the_noise_probe_tells_a_noisy_scene(scene):
+    from mitsuba_mrt.renderer.api import GridTracer
+    from mitsuba_mrt.renderer.auto import noise_free
+
+    sensor = scene.sensors()[0]
+    tracer = GridTracer(scene, sensor, scene.integrator(), 1, 0)
+    assert not noise_free(tracer, 512, 512)
 
 
 def test_by_default_the_passes_meet_the_full_renders_noise(scene):
