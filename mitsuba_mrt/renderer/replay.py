@@ -41,8 +41,7 @@ import drjit as dr
 #: one per layout, and a sweep cycles through many (``bench denoise``: 3
 #: fractions x 7 spp for the grid, 5 albedo sample counts for the id pass, a
 #: few padded sizes of ``refine``'s edges per spp); a recording holds kernels,
-#: not images (128 of them: resident memory within 10 MB of 32's,
-#: docs/BENCHMARKS.md, Replayed traces).
+#: not images.
 RECORDINGS = 128
 #: Traced object sets ((scene, sensor, integrator), (scene, sensor)) that keep
 #: their token: their objects are held, so that no other object can take over
