@@ -165,7 +165,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
-    plan = None
+    plan, pattern = None, None
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
@@ -186,7 +186,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             return _passes_result(outcome, tracer, params, start)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
-    pattern = grid_pattern(width, height, params.sample_fraction)
+    if pattern is None:  # (a plan's pilot has made it already)
+        pattern = grid_pattern(width, height, params.sample_fraction)
     return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet)
 
 

@@ -94,11 +94,12 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     if not denoise and limit is None:
         return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
                                 target_error=params.noise_threshold, notes=notes))
+    probe_start = time.perf_counter()
     if escape and limit is None and params.noise_threshold is None and noise_free(
             tracer, width, height):
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
-                                notes=notes))
+                                pilot_s=time.perf_counter() - probe_start, notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     costs = {}
