@@ -24,7 +24,7 @@ scene is loaded once, and :class:`PointRunner` then
    with the albedo and normal of Mitsuba's ``aov`` integrator at 1 spp and
    without them, the aux render and the denoising timed into its total, for
    the ``oidn-equal-time`` and ``oidn-noaux-equal-time`` rows (none, with a
-   warning, where pyoidn is not installed);
+   warning, where mitsuba-oidn is not installed);
 5. writes one :class:`MethodRow` per method and setting: the lower median of
    its totals, with the stage times of that same run, and the errors and
    lowest pixel value of its image.
@@ -251,7 +251,7 @@ class PointRunner:
 
     def _denoised(self, candidates: dict) -> dict:
         """{method: {spp: Runs}}: every candidate full render denoised by OIDN, as
-        ``oidn`` (with the ``aov`` guides) and ``oidn-noaux``; {} without pyoidn.
+        ``oidn`` (with the ``aov`` guides) and ``oidn-noaux``; {} without OIDN.
 
         A run's total is the render's median total plus the denoising (and,
         with guides, the 1-spp aux render's median); each is timed
@@ -267,7 +267,7 @@ class PointRunner:
             kinds = {OIDN: (albedo, normal), OIDN_NOAUX: (None, None)}
             for guides in kinds.values():
                 denoise_image(self.full.image, *guides, quality=OIDN_BASELINE_QUALITY)
-        except MRTError as exc:  # pyoidn missing or not loading: no OIDN rows
+        except MRTError as exc:  # OIDN missing or not loading: no OIDN rows
             print(f"warning: no {OIDN} baselines at {self.point.scene}: {exc}", file=sys.stderr)
             return {}
         out = {}

@@ -165,7 +165,7 @@ class DenoiseRunner(PointRunner):
                         begin = time.perf_counter()
                         out = denoise_image(image, *guides, quality=quality)
                         seconds = time.perf_counter() - begin + (aux_s if method == OIDN else 0)
-                    except Exception as exc:  # noqa: BLE001 - e.g. pyoidn missing: go on
+                    except Exception as exc:  # noqa: BLE001 - e.g. OIDN missing: go on
                         self.failed[key] = failure_status(exc)
                         continue
                     if not warm:

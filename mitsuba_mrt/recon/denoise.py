@@ -9,16 +9,19 @@ instead, the radiance divided by the albedo, and multiplies the albedo back.
 :func:`denoise_image` is the same filter on any image (the bench's ``oidn``
 baseline denoises full renders with it).
 
-OIDN comes from the optional ``pyoidn`` package (``pip install
-mitsuba-mrt[denoise]``); without it both raise a one-line :class:`MRTError`.
-Its CPU device is created once per process, on first use, and its filters
-(one per quality and set of guides) are kept and reused; calls are
-serialised by a lock, as one OIDN filter is not reentrant.
+OIDN comes from the optional ``mitsuba-oidn`` package (``pip install
+mitsuba-mrt[denoise]``), which runs OIDN on Dr.Jit's own worker threads;
+without it both raise a one-line :class:`MRTError`.  Its CPU device is
+created once per process, on first use, and its filters (one per quality,
+set of guides and image size, the last :data:`FILTERS_KEPT`) are kept
+committed and reused; calls are serialised by a lock, as one OIDN filter
+is not reentrant.
 """
 
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 
 import numpy as np
 
@@ -33,6 +36,10 @@ QUALITIES = ("fast", "balanced", "high")
 #: about 5 % higher; at few spp time buys more (docs/BENCHMARKS.md, Denoising).
 GRID_QUALITY = "fast"
 
+#: Committed filters kept (a render alternates a few image sizes: the grid,
+#: ``auto``'s estimate rows and the whole image; a new size costs a commit).
+FILTERS_KEPT = 4
+
 #: A diffuse surface is textured where its grid pixels' albedo (mean over
 #: RGB) spans more than this ratio, 95th over 5th percentile: the pixels of a
 #: single colour differ only where they straddle another shape.
@@ -44,25 +51,25 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
            "pip install mitsuba-mrt[denoise]")
 
 _lock = threading.Lock()
-_state: dict = {}  # "device", and (quality, guides, clean_aux) -> its RT filter
+_state: dict = {}  # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter
 
 
-def _pyoidn():
-    """The pyoidn module, or MRTError naming the extra."""
+def _oidn():
+    """The mitsuba_oidn module, or MRTError naming the extra."""
     try:
-        import pyoidn
+        import mitsuba_oidn
     except ImportError:
         raise MRTError(MISSING) from None
     except OSError as exc:  # installed, but its native library does not load
         raise MRTError(f"Intel Open Image Denoise does not load: "
                        f"{str(exc).strip().splitlines()[0]}") from None
-    return pyoidn
+    return mitsuba_oidn
 
 
 def oidn_available() -> bool:
-    """Whether Intel Open Image Denoise can be used (``pyoidn`` imports and loads)."""
+    """Whether Intel Open Image Denoise can be used (``mitsuba_oidn`` imports and loads)."""
     try:
-        _pyoidn()
+        _oidn()
     except MRTError:
         return False
     return True
@@ -74,35 +81,31 @@ def release() -> None:
         _state.clear()
 
 
-def _check(device, what: str) -> None:
-    error = device.get_error()
-    if error:
-        raise MRTError(f"Open Image Denoise failed ({what}): {str(error).strip().splitlines()[0]}")
-
-
-def _device(pyoidn):
+def _device(oidn):
     """The process's OIDN CPU device (created and committed on first use)."""
     device = _state.get("device")
     if device is None:
-        device = pyoidn.Device(pyoidn.OIDN_DEVICE_TYPE_CPU)
+        device = oidn.Device(oidn.DeviceType.CPU)
         device.commit()
-        _check(device, "creating the CPU device")
         _state["device"] = device
     return device
 
 
-def _filter(pyoidn, device, quality: str, guides: tuple, clean_aux: bool):
-    key = (quality, guides, clean_aux)
-    flt = _state.get(key)
+def _filter(oidn, device, quality: str, guides: tuple, clean_aux: bool, shape: tuple):
+    """The RT filter for these settings and image size (the least recently used goes)."""
+    filters = _state.setdefault("filters", OrderedDict())
+    key = (quality, guides, clean_aux, shape)
+    flt = filters.get(key)
     if flt is None:
-        flt = pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT)
-        flt.set_bool("hdr", True)
-        flt.set_bool("cleanAux", clean_aux)
-        flt.set_int("quality", {"fast": pyoidn.OIDN_QUALITY_FAST,
-                                "balanced": pyoidn.OIDN_QUALITY_BALANCED,
-                                "high": pyoidn.OIDN_QUALITY_HIGH}[quality])
-        _check(device, "creating the RT filter")
-        _state[key] = flt
+        flt = device.new_filter("RT")
+        flt.hdr = True
+        flt.clean_aux = clean_aux
+        flt.quality = {"fast": oidn.Quality.Fast, "balanced": oidn.Quality.Balanced,
+                       "high": oidn.Quality.High}[quality]
+        filters[key] = flt
+        while len(filters) > FILTERS_KEPT:
+            filters.popitem(last=False)
+    filters.move_to_end(key)
     return flt
 
 
@@ -120,7 +123,7 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     ``clean_aux`` tells OIDN they are noise-free. Returns float64.
     ``quality`` is one of :data:`QUALITIES`.
     """
-    pyoidn = _pyoidn()
+    oidn = _oidn()
     if normal is not None and albedo is None:
         normal = None
     images = {"color": _float3(color)}
@@ -130,18 +133,20 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
         images["normal"] = _float3(normal)
     output = np.empty_like(images["color"])
     with _lock:
-        device = _device(pyoidn)
-        flt = _filter(pyoidn, device, quality, tuple(images), clean_aux)
-        images["output"] = output
         try:
-            for name, image in images.items():
-                flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.commit()  # cheap when the sizes are those of the last call
-            flt.execute()
-            _check(device, "denoising")
-        finally:  # the filter holds raw pointers to these arrays: point it away from them
-            for name in images:
-                flt.unset_image(name)
+            device = _device(oidn)
+            flt = _filter(oidn, device, quality, tuple(images), clean_aux, output.shape)
+            images["output"] = output
+            try:
+                for name, image in images.items():
+                    flt.set_image(name, image)
+                flt.execute()  # commits first only where a setting or an image changed
+            finally:  # the filter holds raw pointers to these arrays: point it away from them
+                for name in images:
+                    flt.unset_image(name)
+        except oidn.Error as exc:
+            raise MRTError(f"Open Image Denoise failed: "
+                           f"{str(exc).strip().splitlines()[0]}") from None
     return output.astype(np.float64)
 
 

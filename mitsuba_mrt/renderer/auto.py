@@ -90,7 +90,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     width, height = pattern.width, pattern.height
     denoise = oidn_available()
     notes = [] if denoise else ["Intel Open Image Denoise is not installed (pip install "
-                                "pyoidn): the plan considers no denoising"]
+                                "mitsuba-oidn): the plan considers no denoising"]
     if not denoise and limit is None:
         return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
                                 target_error=params.noise_threshold, notes=notes))

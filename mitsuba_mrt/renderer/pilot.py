@@ -149,7 +149,7 @@ def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams
         candidates += _denoised(ref, strips, width, ladder, params, pixels, one_px, aov_px,
                                 spp, compile_box)
     elif not denoising:
-        result.notes.append("Intel Open Image Denoise is not installed (pip install pyoidn): "
+        result.notes.append("Intel Open Image Denoise is not installed (pip install mitsuba-oidn): "
                             "the plan considers no denoising")
     if target_error is None and budget is None:
         target_error = result.full_error

@@ -15,9 +15,9 @@ from mitsuba_mrt.modes.paper import paper_reconstruct
 
 from helpers import SCENES
 
-#: The OIDN baselines' rows, where pyoidn is installed (run.py installs it).
+#: The OIDN baselines' rows, where mitsuba-oidn is installed (run.py installs it).
 OIDN_ROWS = ({"oidn-equal-time", "oidn-noaux-equal-time"}
-             if importlib.util.find_spec("pyoidn") else set())
+             if importlib.util.find_spec("mitsuba_oidn") else set())
 
 #: The columns the issue asks for, by their CSV names.
 REQUIRED = ("experiment", "scene", "method", "sample_fraction", "filter_sigma", "filter_cutoff",
@@ -106,14 +106,14 @@ def test_quick_tradeoff_reports_converged_and_equal_time(tmp_path):
                                                             same["error_converged"])
 
 
-def test_without_pyoidn_the_oidn_baselines_are_left_out_with_a_warning(tmp_path, monkeypatch,
+def test_without_oidn_the_oidn_baselines_are_left_out_with_a_warning(tmp_path, monkeypatch,
                                                                         capsys):
     from mitsuba_mrt.recon import denoise
 
     def missing():
         raise MRTError(denoise.MISSING)
 
-    monkeypatch.setattr(denoise, "_pyoidn", missing)
+    monkeypatch.setattr(denoise, "_oidn", missing)
     rows = run_experiment("tradeoff", tmp_path, quick=True, progress=False, methods="nearest",
                           res=16, scenes_dir=SCENES)["tradeoff"].rows
     assert not {r["method"] for r in rows} & {"oidn", "oidn-noaux", "oidn-equal-time",

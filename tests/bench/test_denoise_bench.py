@@ -42,7 +42,7 @@ def test_the_experiment_covers_fig1_and_the_gallery():
 
 
 def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
-    pytest.importorskip("pyoidn")
+    pytest.importorskip("mitsuba_oidn")
     argv = ["bench", "denoise", "--quick", "--res", "24", "-o", str(tmp_path),
             "--scenes", str(SCENES), "--no-progress"]
     assert main(argv) == 0
@@ -106,7 +106,7 @@ def test_quick_denoise_has_oidn_rows(tmp_path, monkeypatch):
 def test_the_progress_bar_ends_at_its_total(scene, defines, beyond):
     """Every tick counted up front is made, where the sampler rounds spp and where a
     setting goes beyond the ladder's top (the quick one: 8 spp)."""
-    pytest.importorskip("pyoidn")
+    pytest.importorskip("mitsuba_oidn")
     exp = experiments.build_experiment("denoise", quick=True, res=12)
     exp.ladder = (1, 2)
     base = exp.points[1].settings

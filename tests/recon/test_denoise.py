@@ -13,7 +13,7 @@ from mitsuba_mrt.recon.denoise import MISSING, denoise_grid, denoise_image
 
 @pytest.fixture
 def oidn():
-    return pytest.importorskip("pyoidn")
+    return pytest.importorskip("mitsuba_oidn")
 
 
 def _guides(shape, albedo=0.5):
@@ -68,7 +68,7 @@ def test_the_device_is_created_once(oidn):
 
 
 def test_missing_extra_is_a_one_line_error(monkeypatch):
-    monkeypatch.setitem(sys.modules, "pyoidn", None)  # import pyoidn raises ImportError
+    monkeypatch.setitem(sys.modules, "mitsuba_oidn", None)  # import mitsuba_oidn raises ImportError
     image = np.full((4, 4, 3), 0.5)
     with pytest.raises(MRTError) as exc:
         denoise_grid(image, *_guides(image.shape))

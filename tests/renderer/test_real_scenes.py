@@ -231,7 +231,7 @@ def test_dark_texture_squares_are_demodulated_like_bright_ones(variant):
 def test_denoising_a_dark_texture_does_not_magnify_its_error(variant):
     # the grid sees the checker as a pattern finer than OIDN keeps: the floor, a
     # textured diffuse surface, is denoised as shading and multiplied back
-    pytest.importorskip("pyoidn")
+    pytest.importorskip("mitsuba_oidn")
     from mitsuba_mrt.renderer.scene_query import diffuse_shapes
 
     scene = mi.load_string(dark_checker_scene(spp=8))
@@ -249,7 +249,7 @@ def test_denoising_a_dark_texture_does_not_magnify_its_error(variant):
 def test_refines_pixels_traced_beyond_the_grid_are_denoised_too(variant):
     # refine traces its edge pixels at the scene's spp, as noisy as a full
     # render's; with denoise they go through OIDN with the rest of the image
-    pytest.importorskip("pyoidn")
+    pytest.importorskip("mitsuba_oidn")
     scene = mi.load_string(path_scene(res=64, spp=4))
     converged = np.mean([mitsuba_mrt.render_reference(scene, spp=256, seed=100 + k)[0]
                          for k in range(2)], axis=0)
