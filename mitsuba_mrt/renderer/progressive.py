@@ -43,8 +43,10 @@ MIN_ROUNDS_MET = 2
 #: A round's predicted time is its passes' at the last round's rate times this:
 #: a launch of a new spp is recorded before it is replayed, which costs more.
 ROUND_SAFETY = 1.3
-#: Strips of rows the error is estimated on (a quarter of the image's rows).
-ESTIMATE_STRIPS = 4
+#: Strips of rows the error is estimated on (a quarter of the image's rows),
+#: and the most pixels they hold in all (a 256 x 256 image's quarter): more
+#: would cost the rounds' OIDN calls without making the estimate surer.
+ESTIMATE_STRIPS, ESTIMATE_PIXELS = 4, 1 << 14
 #: Each pass's radiance is clipped at this for the estimates, as a display
 #: (and the report's metric) clips: a bright sample's excess is noise the
 #: estimates cannot average out.
@@ -188,11 +190,18 @@ def needed_spp(history: list, target: float) -> float:
     return s1 * (e1 / target) ** (1.0 / rate_of(history))
 
 
-def estimate_rows(height: int) -> np.ndarray:
+def estimate_rows(height: int, width: int) -> np.ndarray:
     """The rows the error is estimated on: :data:`ESTIMATE_STRIPS` strips
-    spread down the image, each of ``max(16, height / 16)`` rows (all rows
-    of a small image)."""
-    rows_each = max(16, height // 16)
+    spread down the image: a quarter of its rows, or fewer where those hold
+    more than :data:`ESTIMATE_PIXELS` pixels, but at least 16 rows a strip
+    (all rows of a small image).
+
+    Examples
+    --------
+    >>> [len(estimate_rows(h, w)) for h, w in ((256, 256), (512, 512), (1000, 1000), (48, 48))]
+    [64, 64, 64, 48]
+    """
+    rows_each = max(16, min(height // 16, ESTIMATE_PIXELS // (ESTIMATE_STRIPS * width)))
     if ESTIMATE_STRIPS * rows_each >= height:
         return np.arange(height)
     starts = [round((k + 0.5) * height / ESTIMATE_STRIPS - rows_each / 2)
@@ -217,7 +226,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     """
     xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     n = len(xy)
-    rows = estimate_rows(height)
+    rows = estimate_rows(height, width)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     passes, progress, launch = Passes(crop), Progress(), 0
     round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
