@@ -39,10 +39,10 @@ def setup() -> None:
     if not STAMP.exists() or STAMP.read_text() != digest:
         say("installing mitsuba-mrt and its dependencies")
         subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
-        # with the batch and denoise extras, so that the test suite covers the batch
-        # command and denoise="oidn"
+        # with the batch, denoise and bench extras, so that the test suite covers
+        # the batch command, denoise="oidn" and the bench's FLIP
         subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "-e",
-                        f"{ROOT}[test,batch,denoise]"], check=True)
+                        f"{ROOT}[test,batch,denoise,bench]"], check=True)
         STAMP.write_text(digest)
     ensure_llvm()
 

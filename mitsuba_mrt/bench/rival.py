@@ -10,12 +10,15 @@ ladder, the default ``auto``, ``auto`` under time limits of
 against converged renders (:data:`CONVERGED_SPP`): the film's own filter
 for the full render and the MRT, a box filter for the denoised renders.
 Then, at ``auto``'s own time, the alternative's error (interpolated on its
-curve) and the best configuration's in hindsight.
+curve) and the best configuration's in hindsight.  Beside the report's
+metric, the field's: relative MSE, and NVIDIA's FLIP where the
+``flip-evaluator`` package is installed (``pip install mitsuba-mrt[bench]``).
 """
 
 from __future__ import annotations
 
 import csv
+import math
 import statistics
 import time
 from dataclasses import dataclass, replace
@@ -50,6 +53,7 @@ class Row:
     error: float
     rel_mse: float
     chose: str = ""
+    flip: float = math.nan
 
 
 def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
@@ -61,6 +65,19 @@ def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
     0.0
     """
     return float(np.mean((image - reference) ** 2 / (reference ** 2 + 0.01)))
+
+
+def flip_error(image: np.ndarray, reference: np.ndarray) -> float:
+    """NVIDIA's FLIP (mean over the image) of the linear images as a display
+    shows them (clipped to [0, 1]); NaN without the ``flip-evaluator`` package."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return math.nan
+    shown = [np.ascontiguousarray(np.clip(x, 0.0, 1.0), dtype=np.float32)
+             for x in (reference, image)]
+    return float(flip_evaluator.evaluate(*shown, "LDR", inputsRGB=False, applyMagma=False,
+                                         computeMeanError=True)[1])
 
 
 def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarray:
@@ -130,14 +147,16 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
             spp if k == "full" else int(out.spp))
         rows.append(Row(name, k, spp_used, seconds,
                         seconds / full_s, paper_error(image, truth[kind]),
-                        rel_mse(image, truth[kind]), chose))
+                        rel_mse(image, truth[kind]), chose, flip_error(image, truth[kind])))
     return rows
 
 
-def at_time(rows: list[Row], prefix: str, seconds: float) -> float:
-    """The error of the methods named ``prefix...`` at ``seconds``, interpolated
-    on their curve (log time, log error); their extreme beyond its ends."""
-    curve = sorted((r.relative_time, r.error) for r in rows if r.method.startswith(prefix))
+def at_time(rows: list[Row], prefix: str, seconds: float, metric: str = "error") -> float:
+    """The ``metric`` (a :class:`Row` field) of the methods named ``prefix...``
+    at ``seconds``, interpolated on their curve (log time, log metric); their
+    extreme beyond its ends."""
+    curve = sorted((r.relative_time, getattr(r, metric)) for r in rows
+                   if r.method.startswith(prefix))
     t = np.log([c[0] for c in curve])
     e = np.log([max(c[1], 1e-12) for c in curve])
     return float(np.exp(np.interp(np.log(seconds), t, e)))
@@ -151,6 +170,7 @@ def verdicts(rows: list[Row]) -> list[dict]:
         mine = [r for r in rows if r.scene == scene]
         auto = next(r for r in mine if r.method == "auto")
         alt = at_time(mine, "oidn@", auto.relative_time)
+        field = {m: at_time(mine, "oidn@", auto.relative_time, m) for m in ("rel_mse", "flip")}
         best = min((r.error for r in mine if r.relative_time <= auto.relative_time
                     and not r.method.startswith("auto")), default=float("nan"))
         limits = {}
@@ -160,7 +180,9 @@ def verdicts(rows: list[Row]) -> list[dict]:
                 best_in = min((x.error for x in mine if x.method.startswith("oidn@")
                                and x.relative_time <= share), default=float("nan"))
                 limits[share] = (r.relative_time / share, r.error, best_in)
-        out.append(dict(scene=scene, auto=auto, alternative=alt, best=best, limits=limits))
+        out.append(dict(scene=scene, auto=auto, alternative=alt, best=best, limits=limits,
+                        field_ratios={m: getattr(auto, m) / v if v > 0 else math.nan
+                                      for m, v in field.items()}))
     return out
 
 
@@ -181,21 +203,23 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
     with open(out.path("rival.csv"), "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["scene", "method", "spp", "seconds", "relative_time", "error",
-                         "rel_mse", "chose"])
+                         "rel_mse", "flip", "chose"])
         for r in rows:
             writer.writerow([r.scene, r.method, r.spp, f"{r.seconds:.4f}",
                              f"{r.relative_time:.4f}", f"{r.error:.5f}", f"{r.rel_mse:.5f}",
-                             r.chose])
+                             f"{r.flip:.5f}", r.chose])
     lines = [f"Command: `{command}`", "",
              "| scene | auto chose | auto time | auto error | alternative at that time | "
-             "ratio | best in hindsight | limits 0.1 / 0.25 / 0.5: time / limit, error / "
-             "alternative's best within |", "|---|---|---:|---:|---:|---:|---:|---|"]
+             "ratio | relMSE ratio | FLIP ratio | best in hindsight | limits 0.1 / 0.25 / 0.5: "
+             "time / limit, error / alternative's best within |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for v in verdicts(rows):
         a = v["auto"]
         limits = "; ".join(f"{t:.2f}, {e / b:.2f}" if b == b else f"{t:.2f}, -"
                            for t, e, b in v["limits"].values())
         lines.append(f"| {v['scene']} | {a.chose} | {a.relative_time:.2f} | {a.error:.4f} | "
                      f"{v['alternative']:.4f} | {a.error / v['alternative']:.2f} | "
+                     f"{v['field_ratios']['rel_mse']:.2f} | {v['field_ratios']['flip']:.2f} | "
                      f"{v['best']:.4f} | {limits} |")
     Path(out.path("rival.md")).write_text("\n".join(lines) + "\n")
     scenes = list(dict.fromkeys(r.scene for r in rows))

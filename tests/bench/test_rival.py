@@ -49,5 +49,30 @@ def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant):
     assert (tmp_path / "rival.png").stat().st_size > 0
     lines = (tmp_path / "rival.csv").read_text().splitlines()
     methods = {line.split(",")[1] for line in lines[1:]}
+    assert lines[0].split(",")[7] == "flip"
     assert {"full", "oidn@1", "oidn@4", "auto", "fast", "refine+oidn",
             "auto --time-limit 0.1"} <= methods
+
+
+def test_flip_is_zero_for_the_same_image_and_grows_with_the_difference():
+    pytest.importorskip("flip_evaluator")
+    import numpy as np
+
+    from mitsuba_mrt.bench.rival import flip_error
+
+    image = np.random.default_rng(0).random((32, 32, 3))
+    assert flip_error(image, image) == 0.0
+    near, far = flip_error(image + 0.02, image), flip_error(image + 0.2, image)
+    assert 0.0 < near < far
+
+
+def test_without_flip_evaluator_flip_is_nan(monkeypatch):
+    import math
+    import sys
+
+    import numpy as np
+
+    from mitsuba_mrt.bench.rival import flip_error
+
+    monkeypatch.setitem(sys.modules, "flip_evaluator", None)
+    assert math.isnan(flip_error(np.zeros((4, 4, 3)), np.zeros((4, 4, 3))))
