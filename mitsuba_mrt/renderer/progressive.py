@@ -5,8 +5,9 @@ Every pass traces each pixel once more (a box pixel filter; the first
 samples, OIDN's guides), and the passes go on in rounds that double their
 number (each round two launches, its two halves) until the denoised image's
 estimated error meets the target, the next round would overrun the time
-left, or the spp reach the cap; then the mean of the passes goes through
-OIDN once.  Blender Cycles' time limit and noise threshold work the same way.
+left (then smaller launches fill what is left of it), or the spp reach the
+cap; then the mean of the passes goes through OIDN once.  Blender Cycles'
+time limit and noise threshold work the same way.
 
 The error needs no reference: after a round of ``k`` passes, the mean of
 one half of them is denoised and compared with the mean of the other,
@@ -209,6 +210,28 @@ def estimate_rows(height: int, width: int) -> np.ndarray:
     return np.concatenate([np.arange(s, s + rows_each) for s in starts])
 
 
+def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
+          pass_s: float, recorded: int, max_spp: int, launch: int) -> None:
+    """Passes that fill the time before ``until`` (a ``time.perf_counter()``
+    value) that a whole round does not: launches of the largest power of two
+    up to ``recorded`` spp (an spp the rounds have launched: replayed, not
+    recorded anew) that fits at ``pass_s`` seconds a pass, while one does."""
+    while passes.count < max_spp:
+        fits = (until - time.perf_counter()) / (ROUND_SAFETY * pass_s) if pass_s > 0 else 0.0
+        spp = min(recorded, max_spp - passes.count, int(fits))
+        if spp < 1:
+            return
+        spp = 1 << (spp.bit_length() - 1)
+        begin = time.perf_counter()
+        guides = passes.count < GUIDE_PASSES
+        trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
+                                         ids=False, box=True, replay=True)
+        passes.add(trace, launch % 2, guides)
+        launch += 1
+        progress.trace_s += time.perf_counter() - begin
+        progress.spp = passes.count
+
+
 def run_passes(tracer, width: int, height: int, *, quality: str,
                target_error: float | None, deadline: float | None, max_spp: int,
                full_spp: int, area: float, denoise: bool = True,
@@ -281,6 +304,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         if deadline is not None and (time.perf_counter() + ROUND_SAFETY * next_size * pass_s
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
+            _fill(passes, progress, tracer, xy, deadline - oidn_px * n, pass_s,
+                  round_size // 2, max_spp, launch)
             break
         round_size = next_size
     image = passes.mean

@@ -299,3 +299,36 @@ def test_progress_hears_of_the_mrt_stages(variant):
     mitsuba_mrt.render(mi.load_string(scene_xml(64)), mode="fast",
                        progress=lambda stage, done: heard.append(stage))
     assert heard == ["trace", "reconstruct"]
+
+
+def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatch):
+    from dataclasses import dataclass
+
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.types import SparseTrace
+
+    clock = [0.0]
+    monkeypatch.setattr(progressive.time, "perf_counter", lambda: clock[0])
+    launched = []
+
+    @dataclass(frozen=True)
+    class Tracer:  # one second a sample per pixel, on the fake clock
+        spp: int = 1
+
+        def __call__(self, xy, **_):
+            launched.append(self.spp)
+            clock[0] += self.spp
+            n = len(xy)
+            return SparseTrace(np.full((n, 3), 0.5), np.full((n, 3), 0.5), np.ones(n, np.int64),
+                               np.zeros(n, np.uint32), 0, self.spp, 0.0,
+                               normal=np.zeros((n, 3)), variance=np.zeros((n, 3)))
+
+    xy = np.zeros((4, 2), dtype=np.int64)
+    passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
+    passes.add(Tracer(2)(xy), 0, True)
+    start = clock[0]
+    progressive._fill(passes, progress, Tracer(), xy, until=start + 5.0, pass_s=1.0,
+                      recorded=4, max_spp=64, launch=1)
+    # 5 s left at 1.3 s a pass (the safety): 2 spp, then 2, then 0.77 passes: none
+    assert launched[1:] == [2, 2] and clock[0] <= start + 5.0
+    assert passes.count == 6 and progress.spp == 6
