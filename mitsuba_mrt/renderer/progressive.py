@@ -29,6 +29,7 @@ import numpy as np
 from ..recon.denoise import denoise_image
 from ..recon.metrics import relative_error
 from ..types import SeedStream
+from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
 FIRST_ROUND = 2
@@ -245,7 +246,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     is a ``time.perf_counter()`` value.  ``stop_early(progress, pass_s)``,
     called after every round, may end the passes (return a reason).
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
-    Without ``denoise`` the image is the passes' mean.
+    Without ``denoise`` the image is the passes' mean.  Under a deadline, a
+    sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
+    traces every pass at 1 spp, in as many launches.
     """
     xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     n = len(xy)
@@ -253,15 +256,20 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     passes, progress, launch = Passes(crop), Progress(), 0
     round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
+    # under a deadline, a sampler that compiles kernels per spp traces every
+    # pass at the first round's spp: a new spp's compilation would overrun it
+    most = 1 if deadline is not None and sampler_bakes_spp(tracer.sensor.sampler()) else None
     while True:
         begin = time.perf_counter()
         guides = passes.count < GUIDE_PASSES
-        each = replace(tracer, spp=round_size // 2)
-        for half in (0, 1):  # the two halves of the round, each one launch
-            trace = each(xy, stream=SeedStream.LADDER + launch, aovs=guides, ids=False,
-                         box=True, replay=True)
-            passes.add(trace, half, guides)
-            launch += 1
+        half_spp = round_size // 2 if most is None else most
+        each = replace(tracer, spp=half_spp)
+        for half in (0, 1):  # the two halves of the round, each one launch (or more)
+            for _ in range(round_size // 2 // half_spp):
+                trace = each(xy, stream=SeedStream.LADDER + launch, aovs=guides, ids=False,
+                             box=True, replay=True)
+                passes.add(trace, half, guides)
+                launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
@@ -305,7 +313,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             _fill(passes, progress, tracer, xy, deadline - oidn_px * n, pass_s,
-                  round_size // 2, max_spp, launch)
+                  half_spp, max_spp, launch)
             break
         round_size = next_size
     image = passes.mean

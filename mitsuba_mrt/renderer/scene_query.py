@@ -39,6 +39,14 @@ def has_delta_lobes(scene: mi.Scene) -> bool:
     return any(shows(scene, lambda shape: delta(shape.bsdf()), any))
 
 
+def sampler_bakes_spp(sampler: mi.Sampler) -> bool:
+    """Whether ``sampler``'s arithmetic bakes its sample count into the
+    kernels (all of Mitsuba's but ``independent``: ``stratified``,
+    ``multijitter``, ``orthogonal``, ``ldsampler``): a trace at an spp not
+    traced before compiles kernels of its own."""
+    return not str(sampler).startswith("IndependentSampler")
+
+
 def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:
     """Per shape in :func:`ordered_shapes` order, ``combine`` (``any`` or
     ``all``) of ``test`` over the shapes whose BSDFs it shows.

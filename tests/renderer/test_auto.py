@@ -332,3 +332,21 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
     # 5 s left at 1.3 s a pass (the safety): 2 spp, then 2, then 0.77 passes: none
     assert launched[1:] == [2, 2] and clock[0] <= start + 5.0
     assert passes.count == 6 and progress.spp == 6
+
+
+def test_under_a_time_limit_a_sampler_that_compiles_per_spp_traces_every_pass_at_one(
+        variant, monkeypatch):
+    from mitsuba_mrt.renderer.api import GridTracer
+
+    scene = mi.load_string(scene_xml(512).replace('type="independent"', 'type="multijitter"'))
+    quick = mitsuba_mrt.render(scene, time_limit=1e-6)
+    seen, original = [], GridTracer.__call__
+
+    def spy(self, pixel_xy, **kwargs):
+        if kwargs.get("box"):  # the passes' launches
+            seen.append(self.spp)
+        return original(self, pixel_xy, **kwargs)
+
+    monkeypatch.setattr(GridTracer, "__call__", spy)
+    result = mitsuba_mrt.render(scene, time_limit=20 * quick.timings.total)
+    assert set(seen) == {1} and len(seen) == result.spp
