@@ -211,6 +211,16 @@ def estimate_rows(height: int, width: int) -> np.ndarray:
     return np.concatenate([np.arange(s, s + rows_each) for s in starts])
 
 
+def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
+                half: int) -> None:
+    """Trace every pixel at ``spp`` (launch number ``launch``: its own seed)
+    into ``half`` of ``passes``, with the guides while they are wanted."""
+    guides = passes.count < GUIDE_PASSES
+    trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
+                                     ids=False, box=True, replay=True)
+    passes.add(trace, half, guides)
+
+
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
           pass_s: float, recorded: int, max_spp: int, launch: int) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
@@ -222,12 +232,8 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
         spp = min(recorded, max_spp - passes.count, int(fits))
         if spp < 1:
             return
-        spp = 1 << (spp.bit_length() - 1)
         begin = time.perf_counter()
-        guides = passes.count < GUIDE_PASSES
-        trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
-                                         ids=False, box=True, replay=True)
-        passes.add(trace, launch % 2, guides)
+        _trace_pass(passes, tracer, xy, 1 << (spp.bit_length() - 1), launch, launch % 2)
         launch += 1
         progress.trace_s += time.perf_counter() - begin
         progress.spp = passes.count
@@ -258,17 +264,13 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
     # under a deadline, a sampler that compiles kernels per spp traces every
     # pass at the first round's spp: a new spp's compilation would overrun it
-    most = 1 if deadline is not None and sampler_bakes_spp(tracer.sensor.sampler()) else None
+    at_one = deadline is not None and sampler_bakes_spp(tracer.sensor.sampler())
     while True:
         begin = time.perf_counter()
-        guides = passes.count < GUIDE_PASSES
-        half_spp = round_size // 2 if most is None else most
-        each = replace(tracer, spp=half_spp)
+        half_spp = 1 if at_one else round_size // 2
         for half in (0, 1):  # the two halves of the round, each one launch (or more)
             for _ in range(round_size // 2 // half_spp):
-                trace = each(xy, stream=SeedStream.LADDER + launch, aovs=guides, ids=False,
-                             box=True, replay=True)
-                passes.add(trace, half, guides)
+                _trace_pass(passes, tracer, xy, half_spp, launch, half)
                 launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
