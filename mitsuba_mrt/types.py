@@ -169,6 +169,9 @@ class SparseTrace:
         True where the pixel-centre ray first hits a curved mirror (see
         :func:`mitsuba_mrt.renderer.scene_query.curved_mirror_indices`); None when the
         scene has none.
+    odd : ndarray, shape (n, 3), optional
+        Mean radiance of the pixel's odd-numbered samples (the second, the
+        fourth, ...), where the trace was asked for its halves; else None.
     """
 
     radiance: np.ndarray
@@ -184,6 +187,7 @@ class SparseTrace:
     alpha: np.ndarray | None = None
     variance: np.ndarray | None = None
     normal: np.ndarray | None = None
+    odd: np.ndarray | None = None
 
     def ids(self, rule: str) -> np.ndarray:
         """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).

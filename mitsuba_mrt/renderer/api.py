@@ -104,10 +104,10 @@ class GridTracer:
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
                  pad: bool = False, box: bool = False, ids: bool = True,
-                 albedo: bool = True) -> SparseTrace:
+                 albedo: bool = True, halves: bool = False) -> SparseTrace:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
                             self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
-                            albedo)
+                            albedo, halves)
 
 
 def _check_spp(spp: int | None) -> int | None:

@@ -37,8 +37,9 @@ VARIANCE_FLOOR = 1e-6
 #: Channels of the image block the samples are developed in: weighted RGB,
 #: alpha, the weight, RGB squared (for the variance), albedo and its weight,
 #: the count of samples whose radiance was NaN or Inf, and the shading normal
-#: (weighted as the albedo).
-_CHANNELS = 16
+#: (weighted as the albedo); with ``halves``, also the weighted RGB of the
+#: odd-numbered samples and their weight (:data:`_HALF_CHANNELS` more).
+_CHANNELS, _HALF_CHANNELS = 16, 4
 
 
 @dataclass
@@ -50,6 +51,7 @@ class _Developed:
     variance: np.ndarray  # (n, 3) of a single sample's RGB about the pixel's mean
     albedo: np.ndarray    # (n, 3)
     normal: np.ndarray | None = None  # (n, 3) the samples' mean shading normal
+    odd: np.ndarray | None = None     # (n, 3) the mean RGB of the odd-numbered samples
 
 
 def _camera_ray(sensor, sampler, position, spp, centre: bool = False):
@@ -137,12 +139,15 @@ def _read_sums(sums: np.ndarray, radiance: bool = True) -> _Developed:
         return _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), albedo, normal)
     per_weight = reciprocal(sums[:, 4])[:, None]
     radiance = sums[:, 0:3] * per_weight
+    odd = None
+    if sums.shape[1] > _CHANNELS:  # the odd-numbered samples' own mean
+        odd = sums[:, 16:19] * reciprocal(sums[:, 19])[:, None]
     second = sums[:, 5:8] * per_weight
     radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
     variance = second - radiance ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)
     variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
-    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance, albedo, normal)
+    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance, albedo, normal, odd)
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -180,7 +185,7 @@ def _aligned_float(values: np.ndarray):
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
-                 box=False, sources=None):
+                 box=False, sources=None, halves=False):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -190,6 +195,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     (every pixel within the filter's reach of ``pixel_xy``, for their values
     to be ``mi.render``'s kind; pixels outside the image add nothing).
     ``sampler`` is :func:`_develop_scalar`'s; the kernels clone the sensor's own.
+    With ``halves`` the odd-numbered samples of each pixel are also developed
+    on their own (``odd``).
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -201,13 +208,13 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
-              MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0)
+              MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves))
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if every:
-        sums = sums.numpy().reshape(width * height, _CHANNELS)
+        sums = sums.numpy().reshape(width * height, _CHANNELS + halves * _HALF_CHANNELS)
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
         sums = sums.astype(np.float64) if in_order else sums[index].astype(np.float64)
@@ -233,7 +240,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     a second kernel over every lane to write back.
     """
     (n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells,
-     box, bounces) = layout
+     box, bounces, halves) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
     cell = 2.0 * radius / cells
@@ -280,10 +287,14 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
               a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid,
               a_weight * normal.x, a_weight * normal.y, a_weight * normal.z]
+    if halves:  # the odd-numbered samples of each pixel (lanes are pixel-major)
+        lane = dr.arange(mi.UInt32, n * spp)
+        odd = dr.select(((lane - owner * spp_input) & 1) == 1, weight, 0.0)
+        values += [odd * rgb.x, odd * rgb.y, odd * rgb.z, odd]
     # Evaluate once: each reduction below would otherwise re-run the integrator.
     dr.eval(values)
     if every:
-        block = _new_block(film, rfilter)
+        block = _new_block(film, rfilter, halves)
         block.put(position + mi.ScalarVector2f(crop_offset), values, active)
         return block.tensor()
     sums = [dr.block_sum(value, spp) for value in values]
@@ -291,9 +302,10 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     return sums
 
 
-def _new_block(film, rfilter) -> mi.ImageBlock:
+def _new_block(film, rfilter, halves: bool = False) -> mi.ImageBlock:
     return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
-                         channel_count=_CHANNELS, rfilter=rfilter, border=False)
+                         channel_count=_CHANNELS + halves * _HALF_CHANNELS, rfilter=rfilter,
+                         border=False)
 
 
 #: The box pixel filter of each variant, made on first use.
@@ -309,7 +321,7 @@ def box_filter():
 
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                    replay=False, box=False, sources=None):
+                    replay=False, box=False, sources=None, halves=False):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -318,8 +330,8 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
     every = sources is not None or _every_pixel(pixel_xy, width, height)
     traced = pixel_xy if sources is None else sources
     offset = mi.ScalarVector2f(film.crop_offset())
-    block = _new_block(film, rfilter) if every else None
-    sums = np.zeros((len(pixel_xy), _CHANNELS))
+    block = _new_block(film, rfilter, halves) if every else None
+    sums = np.zeros((len(pixel_xy), _CHANNELS + halves * _HALF_CHANNELS))
     for k, (x, y) in enumerate(traced.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
         for s in range(spp):
@@ -349,6 +361,9 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             values = np.concatenate([weight * rgb, [weight * alpha, weight], weight * rgb ** 2,
                                      a_weight * a_rgb, [a_weight, invalid],
                                      a_weight * normal])
+            if halves:
+                odd = weight * (s % 2)
+                values = np.concatenate([values, odd * rgb, [odd]])
             if every:
                 block.put(mi.ScalarPoint2f(px, py) + offset, [float(v) for v in values])
             else:

@@ -11,9 +11,9 @@ texture) but without tracing.
 Dr.Jit tells a frozen call's inputs apart by their Dr.Jit variables only, not
 by the plain C++ members of Mitsuba objects: two ``path`` integrators that
 differ only in ``max_depth`` look alike to it, and a recording of one would
-be replayed for the other.  So a :class:`Replay` also keys each recording by
-the identity of the Mitsuba objects it traces (the scene, the sensor, the
-integrator), and by the Python values the kernels bake in (``layout``).  A
+be replayed for the other.  So a :class:`Replay` keeps a frozen function per
+identity of the Mitsuba objects it traces (the scene, the sensor, the
+integrator) and Python values the kernels bake in (``layout``).  A
 change made through ``mi.traverse`` is an input like any other and is seen;
 a changed attribute of a Python-defined plugin is not (create a new object).
 
@@ -37,8 +37,8 @@ from typing import Callable
 
 import drjit as dr
 
-#: Recordings kept per kernel function (least recently used dropped first):
-#: one per layout, and a sweep cycles through many (``bench denoise``: 3
+#: Frozen functions kept per kernel function (least recently used dropped
+#: first): one per traced objects and layout, and a sweep cycles through many (``bench denoise``: 3
 #: fractions x 7 spp for the grid, 5 albedo sample counts for the id pass, a
 #: few padded sizes of ``refine``'s edges per spp); a recording holds kernels,
 #: not images.
@@ -79,7 +79,7 @@ def replaying(enabled: bool):
 
 def recordings() -> int:
     """How many recordings every :class:`Replay` has made so far (kept or dropped)."""
-    return sum(replay.frozen.n_recordings for replay in _instances)
+    return sum(replay.n_recordings for replay in _instances)
 
 
 def active() -> bool:
@@ -92,8 +92,7 @@ def clear_recordings() -> None:
     and the objects held for their tokens: later traces are recorded anew, and
     :func:`recordings` counts from zero again.  Tokens are not given again."""
     for replay in _instances:
-        replay.frozen.clear()
-        replay._failed.clear()
+        replay.clear()
     _held.clear()
 
 
@@ -119,6 +118,11 @@ def padded_size(count: int) -> int:
 class Replay:
     """Call ``kernel`` plainly, or replay a recording of it.
 
+    Each (objects, layout) has a frozen function of its own: Dr.Jit's own
+    key does not tell a frozen call's plain Python values apart reliably (of
+    calls whose tuples of small ints differ, it replayed another's recording
+    for many), so the Python values never reach it.
+
     Parameters
     ----------
     kernel : callable
@@ -128,13 +132,23 @@ class Replay:
     """
 
     def __init__(self, kernel: Callable):
-        def recorded(*args, objects_token):  # the token keys the recording too
-            return kernel(*args)
-
         self.plain = kernel  # traced on each call
-        self.frozen = dr.freeze(recorded, limit=RECORDINGS, warn_after=1 << 30)
+        #: (token, layout) -> its frozen function, least recently used first
+        self.frozen: OrderedDict = OrderedDict()
+        self._dropped = 0  # recordings made by the frozen functions let go
         self._failed: set = set()  # (token, layout) that Dr.Jit could not record
         _instances.append(self)
+
+    @property
+    def n_recordings(self) -> int:
+        """Recordings made so far (kept or dropped)."""
+        return self._dropped + sum(f.n_recordings for f in self.frozen.values())
+
+    def clear(self) -> None:
+        """Drop every recording and the layouts that could not be recorded."""
+        self.frozen.clear()
+        self._failed.clear()
+        self._dropped = 0
 
     def __call__(self, *args, objects: tuple, record: bool):
         """``kernel(*args)``; with ``record``, from the recording for these
@@ -142,13 +156,19 @@ class Replay:
         (``args[-1]``), made now if there is none."""
         if not (record and _replaying[-1]):
             return self.plain(*args)
-        token = _token(objects)
-        if (token, args[-1]) in self._failed:
+        key = (_token(objects), args[-1])
+        if key in self._failed:
             return self.plain(*args)
+        frozen = self.frozen.get(key)
+        if frozen is None:
+            frozen = self.frozen[key] = dr.freeze(self.plain, warn_after=1 << 30)
+            if len(self.frozen) > RECORDINGS:
+                self._dropped += self.frozen.popitem(last=False)[1].n_recordings
+        self.frozen.move_to_end(key)
         try:
-            return self.frozen(*args, objects_token=token)
+            return frozen(*args)
         except RuntimeError:  # Dr.Jit cannot record or replay these inputs
-            self._failed.add((token, args[-1]))
+            self._failed.add(key)
             return self.plain(*args)
 
 

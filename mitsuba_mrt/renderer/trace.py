@@ -37,7 +37,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True, replay: bool = False,
                  pad: bool = False, box: bool = False, ids: bool = True,
-                 albedo: bool = True) -> SparseTrace:
+                 albedo: bool = True, halves: bool = False) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -83,6 +83,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         With ``aovs`` and ``radiance``: also the samples' albedo; without, it
         is zero and the samples cost what the integrator's alone do (for
         pixels whose ids alone are used: ``refine``'s edges).
+    halves : bool
+        Also the mean radiance of each pixel's odd-numbered samples
+        (``odd``): with the even-numbered ones, two estimates of the pixel
+        from one launch (independent for the ``independent`` sampler).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -92,7 +96,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         size = padded_size(n)
         padded = np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], size - n, axis=0)])
         return trace_pixels(scene, sensor, integrator, padded, spp, seed, aovs, radiance,
-                            replay=True, box=box, ids=ids, albedo=albedo).take(slice(0, n))
+                            replay=True, box=box, ids=ids, albedo=albedo,
+                            halves=halves).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
@@ -104,7 +109,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     develop = _develop_jit if is_jit() else _develop_scalar
     if radiance:
         samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed,
-                          aovs and albedo, replay, box)
+                          aovs and albedo, replay, box, halves=halves)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
@@ -127,4 +132,5 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        shadow_rays=rule == "rays", path_id=path_id,
                        curved_mirror=np.isin(shape_index, curved) if len(curved) else None,
                        alpha=samples.alpha if radiance else None,
-                       variance=samples.variance if radiance else None, normal=normal)
+                       variance=samples.variance if radiance else None, normal=normal,
+                       odd=samples.odd if radiance else None)

@@ -57,6 +57,38 @@ def test_replay_tells_integrators_apart():
     assert not np.array_equal(plain.radiance, _trace(scene, short, xy, False).radiance)
 
 
+@pytest.mark.parametrize("every", [False, True], ids=["grid", "every pixel"])
+def test_replay_tells_layouts_apart(every):
+    # the same pixels and spp traced with other Python values baked into the
+    # kernels (filter, albedo, halves): Dr.Jit's own key replayed one
+    # layout's recording for another
+    scene = mi.load_string(PATH_SCENE)
+    integrator = scene.integrator()
+    xy = (np.stack(np.meshgrid(np.arange(24), np.arange(24)), -1).reshape(-1, 2) if every
+          else grid_pattern(24, 24, 0.2).pixel_xy)
+    options = [dict(box=b, albedo=a, halves=h) for b in (False, True) for a in (False, True)
+               for h in (False, True)]
+    for _ in range(2):
+        for kwargs in options:
+            replayed = _trace(scene, integrator, xy, True, ids=False, **kwargs)
+            plain = _trace(scene, integrator, xy, False, ids=False, **kwargs)
+            assert (replayed.odd is None) == (not kwargs["halves"])
+            for a, b in zip(_fields(replayed) + [replayed.odd], _fields(plain) + [plain.odd]):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_odd_samples_are_a_half_of_the_pixel():
+    # the pixel's mean is that of its even- and odd-numbered samples' means
+    scene = mi.load_string(PATH_SCENE)
+    xy = np.stack(np.meshgrid(np.arange(24), np.arange(24)), -1).reshape(-1, 2)
+    trace = _trace(scene, scene.integrator(), xy, True, box=True, halves=True, aovs=False)
+    plain = _trace(scene, scene.integrator(), xy, True, box=True, aovs=False)
+    np.testing.assert_allclose(trace.radiance, plain.radiance, rtol=1e-6, atol=1e-7)
+    even = 2.0 * trace.radiance - trace.odd  # 4 spp: two of each
+    assert np.all(even >= -1e-5) and not np.allclose(even, trace.odd)
+    assert trace.odd.mean() == pytest.approx(trace.radiance.mean(), rel=0.2)
+
+
 def test_replay_sees_a_changed_parameter():
     scene = mi.load_string(PATH_SCENE)
     xy = grid_pattern(24, 24, 0.2).pixel_xy
@@ -84,12 +116,12 @@ def test_replaying_false_traces_anew():
 
     scene = mi.load_string(PATH_SCENE)
     xy = grid_pattern(24, 24, 0.3).pixel_xy
-    before = develop._DEVELOP.frozen.n_recordings
+    before = develop._DEVELOP.n_recordings
     with replaying(False):
         _trace(scene, scene.integrator(), xy, True)
-    assert develop._DEVELOP.frozen.n_recordings == before
+    assert develop._DEVELOP.n_recordings == before
     _trace(scene, scene.integrator(), xy, True)
-    assert develop._DEVELOP.frozen.n_recordings == before + 1
+    assert develop._DEVELOP.n_recordings == before + 1
 
 
 def test_each_layout_is_recorded_once():
