@@ -3,7 +3,9 @@
 Every pass traces each pixel once more (a box pixel filter; the first
 :data:`GUIDE_PASSES` also the albedo and shading normal of the same
 samples, OIDN's guides), and the passes go on in rounds that double their
-number (each round two launches, its two halves) until the denoised image's
+number (each round one launch whose odd and even samples are its two
+halves; for a sampler that stratifies a pixel's samples together, two
+launches, one a half) until the denoised image's
 estimated error meets the target, the next round would overrun the time
 left (then smaller launches fill what is left of it), or the spp reach the
 cap; then the mean of the passes goes through OIDN once.  Blender Cycles'
@@ -33,15 +35,20 @@ from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
 FIRST_ROUND = 2
+#: For the default target (a full render's own noise) the first round traces
+#: this share of the scene's spp: where a denoised render's error usually
+#: meets that noise, so that one round, and one launch, often end the passes.
+DEFAULT_FIRST_SHARE = 1 / 8
 #: How fast a denoised image's error falls with the spp, ``spp ** -rate``,
-#: until two rounds have measured it; and the range a measured rate is held in.
-DEFAULT_RATE, RATE_RANGE = 0.5, (0.2, 1.0)
+#: until two rounds have measured it (the slow end of what OIDN's curves
+#: show between 4 and 8 spp); and the range a measured rate is held in.
+DEFAULT_RATE, RATE_RANGE = 0.2, (0.2, 1.0)
 #: Passes that also trace the albedo and normals, OIDN's guides (they cost
 #: about half a sample more each, and the guides converge long before the colour).
 GUIDE_PASSES = 4
-#: Rounds before an estimate may say the target is met: the first (1 spp
-#: against 1 spp) is the noisiest, and a firefly can make it say 0.
-MIN_ROUNDS_MET = 2
+#: Passes before an estimate may say the target is met: 1 spp against 1
+#: spp is the noisiest estimate, and a firefly can make it say 0.
+MIN_SPP_MET = 4
 #: A round's predicted time is its passes' at the last round's rate times this:
 #: a launch of a new spp is recorded before it is replayed, which costs more.
 ROUND_SAFETY = 1.3
@@ -60,11 +67,13 @@ class Passes:
     """Running sums of the passes so far, per pixel (flat, ``(n, 3)``).
 
     The image is the sum over every pixel (``total``); the estimates read
-    sums over the pixels of ``crop`` alone, each trace's pixel means (and
-    variances) clipped at :data:`ESTIMATE_CLIP` (squared) first, so that a
-    rare bright sample (a caustic's firefly) does not swamp what the other
-    pixels say: ``halves`` (the sums of the two independent halves) and
-    ``square`` (of the samples, for the variance).  Counts are samples per pixel.
+    ``halves``, the sums of the two independent halves over the pixels of
+    ``crop`` alone, each trace's half means clipped at :data:`ESTIMATE_CLIP`
+    first, so that a rare bright sample (a caustic's firefly) does not swamp
+    what the other pixels say; and for the variance, ``clipped`` and
+    ``square``, the sums of each trace's pixel means and of its samples'
+    squares, means and variances clipped likewise.  Counts
+    are samples per pixel.
     """
 
     crop: np.ndarray
@@ -74,25 +83,38 @@ class Passes:
     halves: list = field(default_factory=list)
     half_counts: list = field(default_factory=lambda: [0, 0])
     square: np.ndarray | None = None
+    clipped: np.ndarray | None = None
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
     alpha: np.ndarray | None = None
 
-    def add(self, trace, half: int, guides: bool) -> None:
-        """Add ``trace`` (every pixel, at its spp) to half 0 or 1."""
+    def add(self, trace, half: int | None, guides: bool) -> None:
+        """Add ``trace`` (every pixel, at its spp) to half 0 or 1, or, for
+        ``half`` None, its even-numbered samples to half 0 and its odd ones
+        (``trace.odd``) to half 1."""
         spp, radiance = trace.spp, trace.radiance
         if self.count == 0:
             self.total = np.zeros_like(radiance)
             self.halves = [np.zeros((len(self.crop), 3)), np.zeros((len(self.crop), 3))]
             self.square = np.zeros((len(self.crop), 3))
+            self.clipped = np.zeros((len(self.crop), 3))
             self.albedo, self.normal = np.zeros_like(radiance), np.zeros_like(radiance)
             self.alpha = np.zeros(len(radiance))
         self.total += spp * radiance
         clipped = np.minimum(radiance[self.crop], ESTIMATE_CLIP)
-        self.halves[half] += spp * clipped
-        self.half_counts[half] += spp
+        if half is None:
+            odd_spp = spp // 2
+            odd = trace.odd[self.crop]
+            even = (spp * radiance[self.crop] - odd_spp * odd) / (spp - odd_spp)
+            for k, (mean, count) in enumerate(((even, spp - odd_spp), (odd, odd_spp))):
+                self.halves[k] += count * np.minimum(mean, ESTIMATE_CLIP)
+                self.half_counts[k] += count
+        else:
+            self.halves[half] += spp * clipped
+            self.half_counts[half] += spp
         self.square += spp * (np.minimum(trace.variance[self.crop], ESTIMATE_CLIP ** 2)
                               + clipped ** 2)
+        self.clipped += spp * clipped
         if guides:
             self.albedo += spp * trace.albedo
             self.normal += spp * trace.normal
@@ -116,7 +138,7 @@ class Passes:
     @property
     def variance(self) -> np.ndarray:
         """A single sample's variance per pixel of ``crop`` and channel (unbiased)."""
-        mean = (self.halves[0] + self.halves[1]) / self.count
+        mean = self.clipped / self.count
         return np.maximum(self.square / self.count - mean ** 2, 0.0) * (
             self.count / max(self.count - 1, 1))
 
@@ -151,7 +173,7 @@ def rate_of(history: list) -> float:
     >>> round(rate_of([(1, 0.4), (2, 0.2), (4, 0.1)]), 6)
     1.0
     >>> rate_of([(1, 0.4)])
-    0.5
+    0.2
     """
     points = [(math.log(s), math.log(e)) for s, e in history if e > 0]
     if len(points) < 2:
@@ -169,7 +191,7 @@ def predict(history: list, spp: int) -> float:
     --------
     >>> round(predict([(1, 0.4), (2, 0.2)], 4), 6)
     0.1
-    >>> round(predict([(1, 0.4)], 4), 6)
+    >>> round(predict([(1, 0.4)], 32), 6)
     0.2
     """
     (s1, e1) = history[-1]
@@ -212,28 +234,32 @@ def estimate_rows(height: int, width: int) -> np.ndarray:
 
 
 def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
-                half: int) -> None:
+                half: int | None) -> None:
     """Trace every pixel at ``spp`` (launch number ``launch``: its own seed)
-    into ``half`` of ``passes``, with the guides while they are wanted."""
+    into ``half`` of ``passes`` (None: its even and odd samples into each),
+    with the guides while they are wanted."""
     guides = passes.count < GUIDE_PASSES
     trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
-                                     ids=False, box=True, replay=True)
+                                     ids=False, box=True, replay=True, halves=half is None)
     passes.add(trace, half, guides)
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
-          pass_s: float, recorded: int, max_spp: int, launch: int) -> None:
+          pass_s: float, recorded: int, max_spp: int, launch: int, split: bool) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
     value) that a whole round does not: launches of the largest power of two
     up to ``recorded`` spp (an spp the rounds have launched: replayed, not
-    recorded anew) that fits at ``pass_s`` seconds a pass, while one does."""
+    recorded anew) that fits at ``pass_s`` seconds a pass, while one does;
+    with ``split``, each launch into both halves (at least 2 spp), else
+    into one half and the next into the other."""
     while passes.count < max_spp:
         fits = (until - time.perf_counter()) / (ROUND_SAFETY * pass_s) if pass_s > 0 else 0.0
         spp = min(recorded, max_spp - passes.count, int(fits))
-        if spp < 1:
+        if spp < (2 if split else 1):
             return
         begin = time.perf_counter()
-        _trace_pass(passes, tracer, xy, 1 << (spp.bit_length() - 1), launch, launch % 2)
+        _trace_pass(passes, tracer, xy, 1 << (spp.bit_length() - 1), launch,
+                    None if split else launch % 2)
         launch += 1
         progress.trace_s += time.perf_counter() - begin
         progress.spp = passes.count
@@ -262,16 +288,27 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     passes, progress, launch = Passes(crop), Progress(), 0
     round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
+    if target_error is None and deadline is None:  # the default target
+        round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
+                         max_spp)
+    # an independent sampler's odd and even samples are independent: a round
+    # is one launch, its halves those samples; other samplers stratify a
+    # pixel's samples together, so each half of a round is a launch of its own
+    split = not sampler_bakes_spp(tracer.sensor.sampler())
     # under a deadline, a sampler that compiles kernels per spp traces every
-    # pass at the first round's spp: a new spp's compilation would overrun it
-    at_one = deadline is not None and sampler_bakes_spp(tracer.sensor.sampler())
+    # pass at 1 spp: a new spp's compilation would overrun it
+    at_one = deadline is not None and not split
     while True:
         begin = time.perf_counter()
-        half_spp = 1 if at_one else round_size // 2
-        for half in (0, 1):  # the two halves of the round, each one launch (or more)
-            for _ in range(round_size // 2 // half_spp):
-                _trace_pass(passes, tracer, xy, half_spp, launch, half)
-                launch += 1
+        if split:
+            _trace_pass(passes, tracer, xy, round_size, launch, None)
+            launch, launch_spp = launch + 1, round_size
+        else:
+            launch_spp = 1 if at_one else round_size // 2
+            for half in (0, 1):  # the two halves of the round, each one launch (or more)
+                for _ in range(round_size // 2 // launch_spp):
+                    _trace_pass(passes, tracer, xy, launch_spp, launch, half)
+                    launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
@@ -285,7 +322,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
                                      normal.reshape(shape), quality=quality).reshape(-1, 3)
             oidn_px = (time.perf_counter() - begin) / len(crop)
-            squared = (np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2 - variance / half
+            squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
+                       - variance / passes.half_counts[1])
             progress.history.append((half, relative_error(squared, denoised)))
             progress.predicted = predict(progress.history, passes.count)
             progress.full_error = relative_error(variance / (full_spp * area), denoised)
@@ -299,7 +337,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         target = progress.full_error if target_error is None and deadline is None \
             else target_error
         if (target is not None and progress.predicted <= target
-                and len(progress.history) >= MIN_ROUNDS_MET):
+                and passes.count >= MIN_SPP_MET):
             progress.stopped = "met the target"
             break
         if stop_early is not None:
@@ -315,7 +353,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             _fill(passes, progress, tracer, xy, deadline - oidn_px * n, pass_s,
-                  half_spp, max_spp, launch)
+                  launch_spp, max_spp, launch, split)
             break
         round_size = next_size
     image = passes.mean

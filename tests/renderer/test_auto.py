@@ -301,7 +301,8 @@ def test_progress_hears_of_the_mrt_stages(variant):
     assert heard == ["trace", "reconstruct"]
 
 
-def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatch):
+@pytest.mark.parametrize("split", [False, True], ids=["a half a launch", "halves in a launch"])
+def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatch, split):
     from dataclasses import dataclass
 
     from mitsuba_mrt.renderer import progressive
@@ -321,17 +322,36 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
             n = len(xy)
             return SparseTrace(np.full((n, 3), 0.5), np.full((n, 3), 0.5), np.ones(n, np.int64),
                                np.zeros(n, np.uint32), 0, self.spp, 0.0,
-                               normal=np.zeros((n, 3)), variance=np.zeros((n, 3)))
+                               normal=np.zeros((n, 3)), variance=np.zeros((n, 3)),
+                               odd=np.full((n, 3), 0.5))
 
     xy = np.zeros((4, 2), dtype=np.int64)
     passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
-    passes.add(Tracer(2)(xy), 0, True)
+    passes.add(Tracer(2)(xy), None if split else 0, True)
     start = clock[0]
     progressive._fill(passes, progress, Tracer(), xy, until=start + 5.0, pass_s=1.0,
-                      recorded=4, max_spp=64, launch=1)
+                      recorded=4, max_spp=64, launch=1, split=split)
     # 5 s left at 1.3 s a pass (the safety): 2 spp, then 2, then 0.77 passes: none
     assert launched[1:] == [2, 2] and clock[0] <= start + 5.0
     assert passes.count == 6 and progress.spp == 6
+    # halves from a launch's odd and even samples are as large as each other
+    assert passes.half_counts == ([3, 3] if split else [4, 2])
+
+
+def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.types import SparseTrace
+
+    n = 3
+    radiance, odd = np.full((n, 3), 0.4), np.full((n, 3), 0.3)  # so the even mean is 0.5
+    trace = SparseTrace(radiance, np.zeros((n, 3)), np.ones(n, np.int64), np.zeros(n, np.uint32),
+                        0, 4, 0.0, normal=np.zeros((n, 3)), variance=np.zeros((n, 3)), odd=odd)
+    passes = progressive.Passes(np.arange(n))
+    passes.add(trace, None, True)
+    np.testing.assert_allclose(passes.half_mean(0), 0.5)
+    np.testing.assert_allclose(passes.half_mean(1), 0.3)
+    np.testing.assert_allclose(passes.mean, 0.4)
+    assert passes.half_counts == [2, 2] and passes.count == 4
 
 
 def test_under_a_time_limit_a_sampler_that_compiles_per_spp_traces_every_pass_at_one(
