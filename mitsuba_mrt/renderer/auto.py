@@ -46,8 +46,10 @@ PASS_SAMPLES = 2.0
 CHECK_AFTER_ROUNDS = 3
 #: Under a time limit the passes may take up to this many times the scene's spp.
 LIMIT_SPP_FACTOR = 4
-#: Pixels of the probe that tells a noise-free scene (traced with two seeds).
-PROBE_PIXELS = 4096
+#: Pixels of the probe that tells a noise-free scene (traced with two seeds):
+#: its cost grows with them, and a noisy scene is noisy in nearly every one
+#: (one it misses is rendered in full: ``mi.render``'s image, not denoised).
+PROBE_PIXELS = 1024
 
 
 @dataclass
