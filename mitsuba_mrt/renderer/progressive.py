@@ -4,8 +4,7 @@ Every pass traces each pixel once more (a box pixel filter; the first
 :data:`GUIDE_PASSES` also the albedo and shading normal of the same
 samples, OIDN's guides), and the passes go on in rounds that double their
 number (each round one launch whose odd and even samples are its two
-halves; for a sampler that stratifies a pixel's samples together, two
-launches, one a half) until the denoised image's
+halves) until the denoised image's
 estimated error meets the target, the next round would overrun the time
 left (then smaller launches fill what is left of it), or the spp reach the
 cap; then the mean of the passes goes through OIDN once.  Blender Cycles'
@@ -44,7 +43,8 @@ DEFAULT_FIRST_SHARE = 1 / 8
 #: show between 4 and 8 spp); and the range a measured rate is held in.
 DEFAULT_RATE, RATE_RANGE = 0.2, (0.2, 1.0)
 #: Passes that also trace the albedo and normals, OIDN's guides (they cost
-#: about half a sample more each, and the guides converge long before the colour).
+#: about half a sample more each, and the guides converge long before the
+#: colour), or the whole first round where it has more.
 GUIDE_PASSES = 4
 #: Passes before an estimate may say the target is met: 1 spp against 1
 #: spp is the noisiest estimate, and a firefly can make it say 0.
@@ -72,13 +72,15 @@ class Passes:
     first, so that a rare bright sample (a caustic's firefly) does not swamp
     what the other pixels say; and for the variance, ``clipped`` and
     ``square``, the sums of each trace's pixel means and of its samples'
-    squares, means and variances clipped likewise.  Counts
+    squares, means and variances clipped likewise.  ``guides`` counts the
+    samples that traced the guides, ``guide_spp`` how many should.  Counts
     are samples per pixel.
     """
 
     crop: np.ndarray
     count: int = 0
     guides: int = 0
+    guide_spp: int = GUIDE_PASSES
     total: np.ndarray | None = None
     halves: list = field(default_factory=list)
     half_counts: list = field(default_factory=lambda: [0, 0])
@@ -238,7 +240,7 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     """Trace every pixel at ``spp`` (launch number ``launch``: its own seed)
     into ``half`` of ``passes`` (None: its even and odd samples into each),
     with the guides while they are wanted."""
-    guides = passes.count < GUIDE_PASSES
+    guides = passes.count < passes.guide_spp
     trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
                                      ids=False, box=True, replay=True, halves=half is None)
     passes.add(trace, half, guides)
@@ -291,23 +293,23 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     if target_error is None and deadline is None:  # the default target
         round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
                          max_spp)
-    # an independent sampler's odd and even samples are independent: a round
-    # is one launch, its halves those samples; other samplers stratify a
-    # pixel's samples together, so each half of a round is a launch of its own
-    split = not sampler_bakes_spp(tracer.sensor.sampler())
-    # under a deadline, a sampler that compiles kernels per spp traces every
-    # pass at 1 spp: a new spp's compilation would overrun it
-    at_one = deadline is not None and not split
+    passes.guide_spp = max(GUIDE_PASSES, round_size)
+    # a round is one launch, its halves its odd and even samples: a single
+    # launch keeps a stratifying sampler's strata whole (two launches of half
+    # the spp gave 1.3-1.6x the error of one on such scenes); under a deadline
+    # a sampler that compiles kernels per spp traces every pass at 1 spp
+    # instead (a new spp's compilation would overrun it), a half a launch
+    split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
     while True:
         begin = time.perf_counter()
         if split:
             _trace_pass(passes, tracer, xy, round_size, launch, None)
             launch, launch_spp = launch + 1, round_size
         else:
-            launch_spp = 1 if at_one else round_size // 2
-            for half in (0, 1):  # the two halves of the round, each one launch (or more)
-                for _ in range(round_size // 2 // launch_spp):
-                    _trace_pass(passes, tracer, xy, launch_spp, launch, half)
+            launch_spp = 1
+            for half in (0, 1):  # the two halves of the round, a launch a pass
+                for _ in range(round_size // 2):
+                    _trace_pass(passes, tracer, xy, 1, launch, half)
                     launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
