@@ -370,3 +370,28 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_traces_every_pass_at
     monkeypatch.setattr(GridTracer, "__call__", spy)
     result = mitsuba_mrt.render(scene, time_limit=20 * quick.timings.total)
     assert set(seen) == {1} and len(seen) == result.spp
+
+
+@pytest.mark.parametrize("sampler", ["independent", "stratified"])
+def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
+        variant, monkeypatch, sampler):
+    # its halves the launch's odd and even samples: one launch keeps a
+    # stratifying sampler's strata whole, as the alternative's single render does
+    from mitsuba_mrt.renderer.api import GridTracer
+
+    scene = mi.load_string(scene_xml(256, spp=64).replace('type="independent"',
+                                                          f'type="{sampler}"'))
+    seen, original = [], GridTracer.__call__
+
+    def spy(self, pixel_xy, **kwargs):
+        if kwargs.get("box"):  # the passes' launches
+            seen.append((self.spp, kwargs.get("halves", False), len(pixel_xy)))
+        return original(self, pixel_xy, **kwargs)
+
+    monkeypatch.setattr(GridTracer, "__call__", spy)
+    result = mitsuba_mrt.render(scene)
+    assert result.mode_used == "full+oidn"
+    assert seen[0] == (8, True, 256 * 256)
+    assert all(halves for _, halves, _ in seen)
+    # each later round doubles the passes
+    assert [spp for spp, _, _ in seen] == [8 * 2 ** max(k - 1, 0) for k in range(len(seen))]
