@@ -13,7 +13,7 @@ time limit and noise threshold work the same way.
 The error needs no reference: after a round of ``k`` passes, the mean of
 one half of them is denoised and compared with the mean of the other,
 which are independent of it; their difference, less the odd mean's own
-noise (the passes' per-pixel variance over ``k / 2``), estimates the squared
+noise (from the two means' difference), estimates the squared
 error of the image denoised from ``k / 2`` passes, and the last two rounds
 say how fast it falls (:func:`predict`).  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
@@ -324,8 +324,12 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
                                      normal.reshape(shape), quality=quality).reshape(-1, 3)
             oidn_px = (time.perf_counter() - begin) / len(crop)
+            # less the odd half's noise, from the halves' own difference (of the
+            # clipped values compared; the samples' variance, clipped per
+            # launch, is not theirs and took it all away on some scenes)
+            a, b = passes.half_counts
             squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
-                       - variance / passes.half_counts[1])
+                       - (passes.half_mean(0) - passes.half_mean(1)) ** 2 * (a / (a + b)))
             progress.history.append((half, relative_error(squared, denoised)))
             progress.predicted = predict(progress.history, passes.count)
             progress.full_error = relative_error(variance / (full_spp * area), denoised)
