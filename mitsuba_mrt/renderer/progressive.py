@@ -3,11 +3,12 @@
 Every pass traces each pixel once more (a box pixel filter; the first
 :data:`GUIDE_PASSES` also the albedo and shading normal of the same
 samples, OIDN's guides), and the passes go on in rounds that double their
-number (each round one launch whose odd and even samples are its two
-halves) until the denoised image's
-estimated error meets the target, the next round would overrun the time
-left (then smaller launches fill what is left of it), or the spp reach the
-cap; then the mean of the passes goes through OIDN once.  Blender Cycles'
+number until the denoised image's estimated error meets the target, the
+next round would overrun the time left (then smaller launches fill what is
+left of it), or the spp reach the cap; then the mean of the passes goes
+through OIDN once.  A round is one launch, its odd and even samples its
+two halves (under a time limit, a sampler that compiles kernels per spp
+traces 1-spp launches instead, each into one half).  Blender Cycles'
 time limit and noise threshold work the same way.
 
 The error needs no reference: after a round of ``k`` passes, the mean of
