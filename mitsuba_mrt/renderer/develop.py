@@ -42,6 +42,11 @@ VARIANCE_FLOOR = 1e-6
 _CHANNELS, _HALF_CHANNELS = 16, 4
 
 
+def _channels(halves: bool) -> int:
+    """Channels of a block developed with or without ``halves``."""
+    return _CHANNELS + _HALF_CHANNELS if halves else _CHANNELS
+
+
 @dataclass
 class _Developed:
     """Per traced pixel, what its samples gave (numpy)."""
@@ -141,7 +146,7 @@ def _read_sums(sums: np.ndarray, radiance: bool = True) -> _Developed:
     radiance = sums[:, 0:3] * per_weight
     odd = None
     if sums.shape[1] > _CHANNELS:  # the odd-numbered samples' own mean
-        odd = sums[:, 16:19] * reciprocal(sums[:, 19])[:, None]
+        odd = sums[:, _CHANNELS:_CHANNELS + 3] * reciprocal(sums[:, _CHANNELS + 3])[:, None]
     second = sums[:, 5:8] * per_weight
     radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
     variance = second - radiance ** 2
@@ -214,7 +219,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if every:
-        sums = sums.numpy().reshape(width * height, _CHANNELS + halves * _HALF_CHANNELS)
+        sums = sums.numpy().reshape(width * height, _channels(halves))
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
         sums = sums.astype(np.float64) if in_order else sums[index].astype(np.float64)
@@ -304,8 +309,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
 
 def _new_block(film, rfilter, halves: bool = False) -> mi.ImageBlock:
     return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
-                         channel_count=_CHANNELS + halves * _HALF_CHANNELS, rfilter=rfilter,
-                         border=False)
+                         channel_count=_channels(halves), rfilter=rfilter, border=False)
 
 
 #: The box pixel filter of each variant, made on first use.
@@ -331,7 +335,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
     traced = pixel_xy if sources is None else sources
     offset = mi.ScalarVector2f(film.crop_offset())
     block = _new_block(film, rfilter, halves) if every else None
-    sums = np.zeros((len(pixel_xy), _CHANNELS + halves * _HALF_CHANNELS))
+    sums = np.zeros((len(pixel_xy), _channels(halves)))
     for k, (x, y) in enumerate(traced.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
         for s in range(spp):

@@ -138,6 +138,15 @@ class Passes:
         """(albedo, normal): the means of the samples that traced them."""
         return self.albedo[index] / self.guides, self.normal[index] / self.guides
 
+    def half_noise(self) -> np.ndarray:
+        """The squared noise of half 1's mean per pixel of ``crop`` and channel,
+        from the halves' own difference (two independent means of ``a`` and
+        ``b`` samples differ by a sample's variance times ``1 / a + 1 / b`` in
+        mean square): of the clipped values the estimates compare, which the
+        samples' variance, clipped per trace, is not."""
+        a, b = self.half_counts
+        return (self.half_mean(0) - self.half_mean(1)) ** 2 * (a / (a + b))
+
     @property
     def variance(self) -> np.ndarray:
         """A single sample's variance per pixel of ``crop`` and channel (unbiased)."""
@@ -319,19 +328,14 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         begin = time.perf_counter()
         variance = passes.variance
         if denoise:
-            half = passes.count // 2
             shape = (len(rows), width, 3)
             albedo, normal = passes.guide(crop)
             denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
                                      normal.reshape(shape), quality=quality).reshape(-1, 3)
             oidn_px = (time.perf_counter() - begin) / len(crop)
-            # less the odd half's noise, from the halves' own difference (of the
-            # clipped values compared; the samples' variance, clipped per
-            # launch, is not theirs and took it all away on some scenes)
-            a, b = passes.half_counts
             squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
-                       - (passes.half_mean(0) - passes.half_mean(1)) ** 2 * (a / (a + b)))
-            progress.history.append((half, relative_error(squared, denoised)))
+                       - passes.half_noise())
+            progress.history.append((passes.count // 2, relative_error(squared, denoised)))
             progress.predicted = predict(progress.history, passes.count)
             progress.full_error = relative_error(variance / (full_spp * area), denoised)
         else:

@@ -38,10 +38,10 @@ from typing import Callable
 import drjit as dr
 
 #: Frozen functions kept per kernel function (least recently used dropped
-#: first): one per traced objects and layout, and a sweep cycles through many (``bench denoise``: 3
-#: fractions x 7 spp for the grid, 5 albedo sample counts for the id pass, a
-#: few padded sizes of ``refine``'s edges per spp); a recording holds kernels,
-#: not images.
+#: first): one per traced objects and layout, and a sweep cycles through many
+#: (``bench denoise``: 3 fractions x 7 spp for the grid, 5 albedo sample counts
+#: for the id pass, a few padded sizes of ``refine``'s edges per spp); a
+#: recording holds kernels, not images.
 RECORDINGS = 128
 #: Traced object sets ((scene, sensor, integrator), (scene, sensor)) that keep
 #: their token: their objects are held, so that no other object can take over
