@@ -130,29 +130,34 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
 
 def _read_sums(sums: np.ndarray, radiance: bool = True) -> _Developed:
     """The developed values of the traced pixels from their filter-weighted
-    sums; without ``radiance`` (an albedo-only trace) its fields are zero."""
+    sums, channel-major ``(channels, n)`` (each channel contiguous: the
+    arithmetic runs over whole rows, not strided columns); without
+    ``radiance`` (an albedo-only trace) its fields are zero."""
     def reciprocal(weight):  # 0 where nothing was accumulated
         out = np.zeros_like(weight)
         np.divide(1.0, weight, out=out, where=weight != 0.0)
         return out
 
-    per_albedo_weight = reciprocal(np.maximum(sums[:, 11], 0.0))[:, None]
-    albedo = np.clip(sums[:, 8:11] * per_albedo_weight, 0.0, 1.0)
-    normal = np.clip(sums[:, 13:16] * per_albedo_weight, -1.0, 1.0)
+    def pixels(channels):  # (k, n) -> (n, k), C-contiguous as the callers expect
+        return np.ascontiguousarray(channels.T)
+
+    per_albedo_weight = reciprocal(np.maximum(sums[11], 0.0))
+    albedo = pixels(np.clip(sums[8:11] * per_albedo_weight, 0.0, 1.0))
+    normal = pixels(np.clip(sums[13:16] * per_albedo_weight, -1.0, 1.0))
+    n = sums.shape[1]
     if not radiance:
-        n = len(sums)
         return _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), albedo, normal)
-    per_weight = reciprocal(sums[:, 4])[:, None]
-    radiance = sums[:, 0:3] * per_weight
+    per_weight = reciprocal(sums[4])
+    rgb = sums[0:3] * per_weight
     odd = None
-    if sums.shape[1] > _CHANNELS:  # the odd-numbered samples' own mean
-        odd = sums[:, _CHANNELS:_CHANNELS + 3] * reciprocal(sums[:, _CHANNELS + 3])[:, None]
-    second = sums[:, 5:8] * per_weight
-    radiance[sums[:, 12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
-    variance = second - radiance ** 2
+    if len(sums) > _CHANNELS:  # the odd-numbered samples' own mean
+        odd = pixels(sums[_CHANNELS:_CHANNELS + 3] * reciprocal(sums[_CHANNELS + 3]))
+    second = sums[5:8] * per_weight
+    rgb[:, sums[12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
+    variance = second - rgb ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)
     variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
-    return _Developed(radiance, sums[:, 3] * per_weight[:, 0], variance, albedo, normal, odd)
+    return _Developed(pixels(rgb), sums[3] * per_weight, pixels(variance), albedo, normal, odd)
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -207,10 +212,13 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     width, height = (int(v) for v in film.crop_size())
     table = filter_table(box_filter() if box else film.rfilter())
     every = sources is not None or _every_pixel(pixel_xy, width, height)
+    # every pixel through a box filter: each sample stays in its pixel, whose
+    # sums are its own lanes', as for some pixels (no image block)
+    splat = every and (sources is not None or not box)
     traced = pixel_xy if sources is None else sources
     n = len(traced)
     # what the kernels bake in, so that a recording is replayed only where it holds
-    layout = (n, int(spp), integrator is not None, bool(albedo), every, width, height,
+    layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves))
@@ -218,22 +226,22 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
-    if every:
+    if splat:
         sums = sums.numpy().reshape(width * height, _channels(halves))
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
-        sums = sums.astype(np.float64) if in_order else sums[index].astype(np.float64)
+        sums = np.ascontiguousarray((sums if in_order else sums[index]).T).astype(np.float64)
     else:
         sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
-                         for total in sums], axis=1)  # (literal zeros broadcast)
+                         for total in sums])  # (literal zeros broadcast)
     return _read_sums(sums, integrator is not None)
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
                     layout):
     """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
-    per pixel (a list of channels) or, for every pixel, as an image block's
-    tensor.  Everything they depend on is an argument (``layout`` the Python
+    per pixel (a list of channels) or, splatted over every pixel through the
+    filter, as an image block's tensor.  Everything they depend on is an argument (``layout`` the Python
     values), so that :func:`drjit.freeze` can record and replay them.
 
     The spp is also an opaque input (``spp_input``), not a literal: a kernel
@@ -244,7 +252,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     also its outputs, and the sampler's state after the samples would cost
     a second kernel over every lane to write back.
     """
-    (n, spp, _, albedo, every, width, height, crop_offset, sample_border, radius, cells,
+    (n, spp, _, albedo, every, splat, width, height, crop_offset, sample_border, radius, cells,
      box, bounces, halves) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
@@ -300,7 +308,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     # no channel of every sample is written out (0.4 GB at 1000 x 1000, a
     # tenth traced, 64 spp) to be reduced after, which a fresh process pays
     # for in page faults.
-    if every:
+    if splat:
         block = _new_block(film, rfilter, halves)
         block.put(position + mi.ScalarVector2f(crop_offset), values, active)
         return block.tensor()
@@ -382,7 +390,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             sampler.advance()
     if every:
         sums = np.array(block.tensor(), dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
-    return _read_sums(sums, integrator is not None)
+    return _read_sums(np.ascontiguousarray(sums.T), integrator is not None)
 
 
 #: The samples' kernels, replayed from a recording when the same trace repeats.
