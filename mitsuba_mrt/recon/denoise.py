@@ -21,6 +21,7 @@ is not reentrant.
 from __future__ import annotations
 
 import threading
+import time
 from collections import OrderedDict
 
 import numpy as np
@@ -51,7 +52,9 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
            "pip install mitsuba-mrt[denoise]")
 
 _lock = threading.Lock()
-_state: dict = {}  # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter
+# "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter;
+# "seconds": quality -> seconds per pixel of the last filter's execution
+_state: dict = {}
 
 
 def _oidn():
@@ -79,6 +82,14 @@ def release() -> None:
     """Let go of the OIDN device and filters; the next call creates them anew."""
     with _lock:
         _state.clear()
+
+
+def denoise_seconds(pixels: int, quality: str) -> float | None:
+    """The seconds :func:`denoise_image` is expected to take on ``pixels``
+    pixels at ``quality``: the last call's rate, its filter's set-up left out
+    (None before any call at ``quality`` in this process)."""
+    rate = _state.get("seconds", {}).get(quality)
+    return None if rate is None else rate * pixels
 
 
 def _device(oidn):
@@ -140,7 +151,11 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
             try:
                 for name, image in images.items():
                     flt.set_image(name, image)
-                flt.execute()  # commits first only where a setting or an image changed
+                flt.commit()  # (a new filter's set-up, kept out of the time below)
+                begin = time.perf_counter()
+                flt.execute()
+                _state.setdefault("seconds", {})[quality] = (
+                    (time.perf_counter() - begin) / (output.shape[0] * output.shape[1]))
             finally:  # the filter holds raw pointers to these arrays: point it away from them
                 for name in images:
                     flt.unset_image(name)

@@ -18,6 +18,8 @@ noise (from the two means' difference), estimates the squared
 error of the image denoised from ``k / 2`` passes, and the last two rounds
 say how fast it falls (:func:`predict`).  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
+Under a time limit alone, once an earlier call in the process has said what
+OIDN costs, no error is estimated: the passes only fill the time.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..recon.denoise import denoise_image
+from ..recon.denoise import denoise_image, denoise_seconds
 from ..recon.metrics import relative_error
 from ..types import SeedStream
 from .scene_query import sampler_bakes_spp
@@ -256,6 +258,33 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     passes.add(trace, half, guides)
 
 
+def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full_spp: int,
+              area: float, denoise: bool) -> float:
+    """Add the round's estimates to ``progress`` (see the module): the error
+    of the image denoised from half the passes so far (its history), the
+    prediction for all of them, and a full render's own at ``full_spp``;
+    without ``denoise``, the passes' mean's error.  Returns OIDN's seconds
+    per pixel (0 without ``denoise``)."""
+    variance = passes.variance
+    if not denoise:
+        mean = (passes.halves[0] + passes.halves[1]) / passes.count
+        progress.predicted = relative_error(variance / passes.count, mean)
+        progress.full_error = relative_error(variance / (full_spp * area), mean)
+        return 0.0
+    begin = time.perf_counter()
+    shape = (len(passes.crop) // width, width, 3)
+    albedo, normal = passes.guide(passes.crop)
+    denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
+                             normal.reshape(shape), quality=quality).reshape(-1, 3)
+    oidn_px = (time.perf_counter() - begin) / len(passes.crop)
+    squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
+               - passes.half_noise())
+    progress.history.append((passes.count // 2, relative_error(squared, denoised)))
+    progress.predicted = predict(progress.history, passes.count)
+    progress.full_error = relative_error(variance / (full_spp * area), denoised)
+    return oidn_px
+
+
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
           pass_s: float, recorded: int, max_spp: int, launch: int, split: bool) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
@@ -303,6 +332,13 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     if target_error is None and deadline is None:  # the default target
         round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
                          max_spp)
+    # A time limit alone needs no estimates once OIDN's cost is known (from an
+    # earlier call in this process): the passes fill the time, from 1 spp on,
+    # in one half.
+    known = denoise_seconds(n, quality) if denoise else 0.0
+    estimates = not (deadline is not None and target_error is None and known is not None)
+    if not estimates:
+        round_size, oidn_px = 1, known / n
     passes.guide_spp = max(GUIDE_PASSES, round_size)
     # a round is one launch, its halves its odd and even samples: a single
     # launch keeps a stratifying sampler's strata whole (two launches of half
@@ -313,36 +349,21 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     while True:
         begin = time.perf_counter()
         if split:
-            _trace_pass(passes, tracer, xy, round_size, launch, None)
+            _trace_pass(passes, tracer, xy, round_size, launch, None if estimates else 0)
             launch, launch_spp = launch + 1, round_size
         else:
             launch_spp = 1
-            for half in (0, 1):  # the two halves of the round, a launch a pass
-                for _ in range(round_size // 2):
-                    _trace_pass(passes, tracer, xy, 1, launch, half)
-                    launch += 1
+            for k in range(round_size):  # a launch a pass, the round's first half into half 0
+                _trace_pass(passes, tracer, xy, 1, launch, 2 * k // round_size)
+                launch += 1
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
         progress.spp = passes.count
-        begin = time.perf_counter()
-        variance = passes.variance
-        if denoise:
-            shape = (len(rows), width, 3)
-            albedo, normal = passes.guide(crop)
-            denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
-                                     normal.reshape(shape), quality=quality).reshape(-1, 3)
-            oidn_px = (time.perf_counter() - begin) / len(crop)
-            squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
-                       - passes.half_noise())
-            progress.history.append((passes.count // 2, relative_error(squared, denoised)))
-            progress.predicted = predict(progress.history, passes.count)
-            progress.full_error = relative_error(variance / (full_spp * area), denoised)
-        else:
-            mean = (passes.halves[0] + passes.halves[1]) / passes.count
-            progress.predicted = relative_error(variance / passes.count, mean)
-            progress.full_error = relative_error(variance / (full_spp * area), mean)
-        progress.estimate_s += time.perf_counter() - begin
+        if estimates:
+            begin = time.perf_counter()
+            oidn_px = _estimate(passes, progress, width, quality, full_spp, area, denoise)
+            progress.estimate_s += time.perf_counter() - begin
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
         target = progress.full_error if target_error is None and deadline is None \
@@ -364,7 +385,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             _fill(passes, progress, tracer, xy, deadline - oidn_px * n, pass_s,
-                  launch_spp, max_spp, launch, split)
+                  launch_spp, max_spp, launch, split and estimates)
             break
         round_size = next_size
     image = passes.mean

@@ -67,6 +67,16 @@ def test_the_device_is_created_once(oidn):
     assert denoise._state["device"] is device
 
 
+def test_its_cost_is_known_after_a_call(oidn):
+    denoise.release()
+    assert denoise.denoise_seconds(100, "fast") is None
+    image = np.full((8, 8, 3), 0.5)
+    denoise_image(image, *_guides(image.shape), quality="fast")
+    one = denoise.denoise_seconds(100, "fast")
+    assert one > 0 and denoise.denoise_seconds(200, "fast") == pytest.approx(2 * one)
+    assert denoise.denoise_seconds(100, "high") is None
+
+
 def test_missing_extra_is_a_one_line_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "mitsuba_oidn", None)  # import mitsuba_oidn raises ImportError
     image = np.full((4, 4, 3), 0.5)
