@@ -5,7 +5,8 @@
 measure how good the denoised image gets, so the common case spends nothing
 on planning.  Under a time limit the passes fill it.  Without one they go
 on until the estimated error meets ``noise_threshold`` (default: the full
-render's own noise at the scene's spp, or the scene's spp), unless the scene
+render's own noise at the scene's spp, or half the scene's spp, where one
+more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
 full render, which is exact) or, for a threshold asked for, a
 round (the third on) predicts that meeting it in passes costs more than a
@@ -30,7 +31,7 @@ from ..recon.denoise import oidn_available
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
-from .progressive import Progress, needed_spp, run_passes
+from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -46,6 +47,10 @@ PASS_SAMPLES = 2.0
 CHECK_AFTER_ROUNDS = 3
 #: Under a time limit the passes may take up to this many times the scene's spp.
 LIMIT_SPP_FACTOR = 4
+#: Under the default target they stop at this share of it: the round that
+#: doubles them to the scene's spp costs a full render, the rounds before it
+#: included, and a full render's own noise is the target.
+DEFAULT_SPP_SHARE = 0.5
 #: Pixels of the probe that tells a noise-free scene (traced with two seeds):
 #: its cost grows with them, and a noisy scene is noisy in nearly every one
 #: (one it misses is rendered in full: ``mi.render``'s image, not denoised).
@@ -124,10 +129,16 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             return None
         return "more passes would cost more than a full render"
 
+    if limit is not None:
+        max_spp = spp * LIMIT_SPP_FACTOR
+    elif params.noise_threshold is None:
+        max_spp = max(FIRST_ROUND, int(spp * DEFAULT_SPP_SHARE))
+    else:
+        max_spp = spp
     image, alpha, progress = run_passes(
         tracer, width, height, quality=params.denoise_quality,
         target_error=params.noise_threshold, deadline=deadline,
-        max_spp=spp * (LIMIT_SPP_FACTOR if limit is not None else 1), full_spp=spp, area=area,
+        max_spp=max_spp, full_spp=spp, area=area,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round)
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")

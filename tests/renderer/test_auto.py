@@ -19,6 +19,18 @@ from mitsuba_mrt.renderer import auto, pilot
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def test_by_default_the_passes_stop_at_half_the_scenes_spp(variant, monkeypatch):
+    # the round to the scene's spp would cost a full render, the rounds before included
+    from mitsuba_mrt.renderer import progressive
+
+    monkeypatch.setattr(progressive, "predict", lambda history, spp: 1.0)  # never met
+    scene = mi.load_string(scene_xml(256, spp=64))
+    result = mitsuba_mrt.render(scene)
+    assert result.mode_used == "full+oidn" and result.spp == 32
+    assert result.auto.reason == "denoised passes: reached 32 spp"
+    assert [spp for spp, _ in result.auto.passes] == [4, 8, 16]
+
+
 def scene_xml(res: int, spp: int = 8, rfilter: str = "box") -> str:
     """A diffuse ball on a plane under an area light, path traced: noisy, as real scenes are."""
     return f"""<scene version="3.0.0">
@@ -295,7 +307,7 @@ def test_bad_control_values_exit_2_with_one_line(tmp_path, option, value):
 def test_progress_hears_of_every_round_of_passes(scene):
     heard = []
     result = mitsuba_mrt.render(scene, progress=lambda stage, done: heard.append((stage, done)))
-    assert heard[0] == ("passes (2 spp)", 2 / 8)
+    assert heard[0] == ("passes (2 spp)", 2 / 4)  # of at most half the scene's 8 spp
     assert heard[-1][0] == f"passes ({result.spp} spp)"
     assert [done for _, done in heard] == sorted(done for _, done in heard)
 
