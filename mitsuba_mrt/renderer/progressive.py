@@ -279,7 +279,7 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
     oidn_px = (time.perf_counter() - begin) / len(passes.crop)
     squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
                - passes.half_noise())
-    progress.history.append((passes.count // 2, relative_error(squared, denoised)))
+    progress.history.append((passes.half_counts[0], relative_error(squared, denoised)))
     progress.predicted = predict(progress.history, passes.count)
     progress.full_error = relative_error(variance / (full_spp * area), denoised)
     return oidn_px
