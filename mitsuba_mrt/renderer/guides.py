@@ -16,6 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from .scene import resolve_sensor
+from .scene_query import set_sample_count
 
 #: The ``aov`` integrator's channels: albedo (RGB), then the shading normal (XYZ).
 GUIDE_AOVS = "albedo:albedo,nn:sh_normal"
@@ -47,13 +48,7 @@ def render_guides(scene: mi.Scene, *, sensor=0, spp: int = 1,
 def sampler_spp(scene: mi.Scene, spp: int, *, sensor=0) -> tuple[str, int]:
     """(the sensor's sampler, as its plugin is named, the spp it takes when asked for ``spp``)."""
     sampler = resolve_sensor(scene, sensor).sampler().clone()
-    logger = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
-    level = logger.log_level()
-    logger.set_log_level(mi.LogLevel.Error)  # no warning about the rounding asked about
-    try:
-        sampler.set_sample_count(int(spp))
-    finally:
-        logger.set_log_level(level)
+    count = set_sample_count(sampler, spp)
     name = sampler.class_name()
     name = {"LowDiscrepancySampler": "ldsampler"}.get(name, name.removesuffix("Sampler").lower())
-    return name, int(sampler.sample_count())
+    return name, count

@@ -47,6 +47,20 @@ def sampler_bakes_spp(sampler: mi.Sampler) -> bool:
     return not str(sampler).startswith("IndependentSampler")
 
 
+def set_sample_count(sampler: mi.Sampler, spp: int) -> int:
+    """Set ``sampler`` to ``spp`` samples per pixel; return the count it takes
+    (``stratified`` and ``multijitter`` round up to a square), without the
+    warning Mitsuba logs for the rounding: the callers report the count taken."""
+    logger = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
+    level = logger.log_level()
+    logger.set_log_level(mi.LogLevel.Error)
+    try:
+        sampler.set_sample_count(int(spp))
+    finally:
+        logger.set_log_level(level)
+    return int(sampler.sample_count())
+
+
 def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:
     """Per shape in :func:`ordered_shapes` order, ``combine`` (``any`` or
     ``all``) of ``test`` over the shapes whose BSDFs it shows.

@@ -23,8 +23,8 @@ from .ids import _ids_jit, _ids_scalar
 from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
-from .scene_query import (_shape_lookup, curved_mirror_indices, replayable, shadow_rule,
-                          tracked_lights)
+from .scene_query import (_shape_lookup, curved_mirror_indices, replayable, set_sample_count,
+                          shadow_rule, tracked_lights)
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.  Dark
@@ -102,8 +102,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
     sampler = sensor.sampler().clone()
-    sampler.set_sample_count(int(spp))
-    spp = sampler.sample_count()
+    spp = set_sample_count(sampler, spp)
     replay = replay and is_jit() and replayable(scene)
     zero = np.zeros(n, np.int64)
     develop = _develop_jit if is_jit() else _develop_scalar

@@ -295,6 +295,15 @@ def test_the_json_lists_the_plan(tmp_path, variant):
                                   "compile_s"}
 
 
+def test_a_samplers_rounding_of_the_passes_spp_is_not_warned_of(tmp_path, variant):
+    # stratified at 64 spp: the first round's 8 spp are 9, the probe's 2 are 4
+    path = tmp_path / "ball.xml"
+    path.write_text(scene_xml(512, spp=64).replace('type="independent"', 'type="stratified"'))
+    proc = run_cli("render", path, "-o", tmp_path / "out", "--no-reference", "--no-progress")
+    assert proc.returncode == 0 and "full+oidn" in proc.stdout
+    assert "WARN" not in proc.stderr + proc.stdout
+
+
 @pytest.mark.parametrize("option", ["--time-limit", "--noise-threshold"])
 @pytest.mark.parametrize("value", ["0", "-2", "nan"])
 def test_bad_control_values_exit_2_with_one_line(tmp_path, option, value):
