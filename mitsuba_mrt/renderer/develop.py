@@ -128,36 +128,42 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
     return albedo, hit, normal
 
 
-def _read_sums(sums: np.ndarray, radiance: bool = True) -> _Developed:
+def _read_sums(sums, radiance: bool = True) -> _Developed:
     """The developed values of the traced pixels from their filter-weighted
-    sums, channel-major ``(channels, n)`` (each channel contiguous: the
-    arithmetic runs over whole rows, not strided columns); without
-    ``radiance`` (an albedo-only trace) its fields are zero."""
+    sums: a sequence of channels, each ``(n,)`` (whole contiguous rows, not
+    strided columns, for the arithmetic; only the channels used are read);
+    without ``radiance`` (an albedo-only trace) its fields are zero."""
     def reciprocal(weight):  # 0 where nothing was accumulated
         out = np.zeros_like(weight)
         np.divide(1.0, weight, out=out, where=weight != 0.0)
         return out
 
+    def rows(first, stop):  # channels first .. stop - 1 as a (k, n) float64 array
+        return np.stack([np.asarray(c, dtype=np.float64) for c in sums[first:stop]])
+
     def pixels(channels):  # (k, n) -> (n, k), C-contiguous as the callers expect
         return np.ascontiguousarray(channels.T)
 
-    per_albedo_weight = reciprocal(np.maximum(sums[11], 0.0))
-    albedo = pixels(np.clip(sums[8:11] * per_albedo_weight, 0.0, 1.0))
-    normal = pixels(np.clip(sums[13:16] * per_albedo_weight, -1.0, 1.0))
-    n = sums.shape[1]
+    n = len(sums[0])
+    per_albedo_weight = reciprocal(np.maximum(np.asarray(sums[11], dtype=np.float64), 0.0))
+    albedo = pixels(np.clip(rows(8, 11) * per_albedo_weight, 0.0, 1.0))
+    normal = pixels(np.clip(rows(13, 16) * per_albedo_weight, -1.0, 1.0))
     if not radiance:
         return _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), albedo, normal)
-    per_weight = reciprocal(sums[4])
-    rgb = sums[0:3] * per_weight
+    per_weight = reciprocal(np.asarray(sums[4], dtype=np.float64))
+    rgb = rows(0, 3) * per_weight
     odd = None
     if len(sums) > _CHANNELS:  # the odd-numbered samples' own mean
-        odd = pixels(sums[_CHANNELS:_CHANNELS + 3] * reciprocal(sums[_CHANNELS + 3]))
-    second = sums[5:8] * per_weight
-    rgb[:, sums[12] > 0.0] = np.nan  # reported by the caller's check, as a full render's
+        odd = pixels(rows(_CHANNELS, _CHANNELS + 3)
+                     * reciprocal(np.asarray(sums[_CHANNELS + 3], dtype=np.float64)))
+    second = rows(5, 8) * per_weight
+    # a sample's NaN or Inf: reported by the caller's check, as a full render's
+    rgb[:, np.asarray(sums[12]) > 0.0] = np.nan
     variance = second - rgb ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)
     variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
-    return _Developed(pixels(rgb), sums[3] * per_weight, pixels(variance), albedo, normal, odd)
+    return _Developed(pixels(rgb), np.asarray(sums[3], dtype=np.float64) * per_weight,
+                      pixels(variance), albedo, normal, odd)
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -230,10 +236,9 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         sums = sums.numpy().reshape(width * height, _channels(halves))
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
-        sums = np.ascontiguousarray((sums if in_order else sums[index]).T).astype(np.float64)
-    else:
-        sums = np.stack([np.broadcast_to(np.asarray(total, dtype=np.float64), (n,))
-                         for total in sums])  # (literal zeros broadcast)
+        sums = list(np.ascontiguousarray((sums if in_order else sums[index]).T))
+    else:  # (a channel of literal zeros is one value: broadcast)
+        sums = [np.broadcast_to(np.asarray(total), (n,)) for total in sums]
     return _read_sums(sums, integrator is not None)
 
 
@@ -241,8 +246,9 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
                     layout):
     """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
     per pixel (a list of channels) or, splatted over every pixel through the
-    filter, as an image block's tensor.  Everything they depend on is an argument (``layout`` the Python
-    values), so that :func:`drjit.freeze` can record and replay them.
+    filter, as an image block's tensor.  Everything they depend on is an
+    argument (``layout`` the Python values), so that :func:`drjit.freeze`
+    can record and replay them.
 
     The spp is also an opaque input (``spp_input``), not a literal: a kernel
     compiled for one spp is the kernel of every other (only the sampler's
@@ -390,7 +396,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             sampler.advance()
     if every:
         sums = np.array(block.tensor(), dtype=np.float64)[pixel_xy[:, 1], pixel_xy[:, 0]]
-    return _read_sums(np.ascontiguousarray(sums.T), integrator is not None)
+    return _read_sums(list(np.ascontiguousarray(sums.T)), integrator is not None)
 
 
 #: The samples' kernels, replayed from a recording when the same trace repeats.
