@@ -16,7 +16,8 @@ one half of them is denoised and compared with the mean of the other,
 which are independent of it; their difference, less the odd mean's own
 noise (from the two means' difference), estimates the squared
 error of the image denoised from ``k / 2`` passes, and the last two rounds
-say how fast it falls (:func:`predict`).  It is measured on a quarter of the
+say how fast it falls (:func:`predict`); a round that ends the passes at
+their cap is not estimated, only predicted.  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 Under a time limit alone, once an earlier call in the process has said what
 OIDN costs, no error is estimated: the passes only fill the time.
@@ -360,7 +361,11 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         progress.trace_s += spent
         pass_s = spent / round_size
         progress.spp = passes.count
-        if estimates:
+        if estimates and denoise and progress.history and 2 * passes.count > max_spp:
+            # the last round (the next would pass the cap): its estimate would
+            # change no decision, so the earlier rounds' predict its error
+            progress.predicted = predict(progress.history, passes.count)
+        elif estimates:
             begin = time.perf_counter()
             oidn_px = _estimate(passes, progress, width, quality, full_spp, area, denoise)
             progress.estimate_s += time.perf_counter() - begin
