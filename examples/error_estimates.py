@@ -36,21 +36,22 @@ ROOT = Path(__file__).resolve().parents[1]
 TILE = 8
 
 
-def two_part_l1(image, a, b, variance, xy, width):
-    """The two-part estimate of ``image``'s mean absolute error (see the module)
-    against the independent references ``a`` and ``b`` (n, 3), both clipped as
+def estimates(image, a, b, variance, xy, width):
+    """(naive, two-part, RMS) estimates of ``image``'s error (see the module)
+    against the independent references ``a`` and ``b`` (n, 3), all clipped as
     displayed; ``variance`` a single sample's per pixel over the halves' spp."""
-    mean = 0.5 * (a + b)
+    e = image - 0.5 * (a + b)
     noise = (a - b) ** 2 / 4  # unbiased squared noise of the mean, independent of it
+    naive = np.abs(e).mean() - np.sqrt(2 / np.pi) * np.sqrt(noise).mean()
+    rms = np.sqrt(max(float((e * e - noise).mean()), 0.0))
     sigma = np.sqrt(variance * noise.sum() / max(variance.sum(), 1e-30))  # calibrated
-    e = image - mean
     large = np.abs(e) > 3 * sigma
     squared = np.where(large, 0.0, e * e - 0.973 * noise)  # 0.973: a normal's, cut at 3 sigma
     tile = (xy[:, 1] // TILE) * (-(-width // TILE)) + xy[:, 0] // TILE
     count = np.bincount(tile, weights=(~large).sum(axis=1))
     total = np.bincount(tile, weights=squared.sum(axis=1))
     small = count * np.sqrt(2 / np.pi) * np.sqrt(np.maximum(total, 0) / np.maximum(count, 1))
-    return (np.abs(e[large]).sum() + small.sum()) / e.size
+    return naive, (np.abs(e[large]).sum() + small.sum()) / e.size, rms
 
 
 def main():
@@ -94,16 +95,11 @@ def main():
         candidates += [(f"{m}+oidn", "film", render(scene, mode=m, denoise="oidn").image)
                        for m in ("fast", "refine", "idpass")]
         for label, kind, image in candidates:
-            a, b, variance = refs[kind]
             shown = np.clip(image.reshape(-1, 3), 0, 1)
-            e = shown - 0.5 * (a + b)
-            noise = (a - b) ** 2 / 4
-            naive = np.abs(e).mean() - np.sqrt(2 / np.pi) * np.sqrt(noise).mean()
-            rms = np.sqrt(max(float((e * e - noise).mean()), 0.0))
+            naive, two_part, rms = estimates(shown, *refs[kind], xy, width)
             true_rms = np.sqrt(np.mean((shown - np.clip(truth[kind].reshape(-1, 3), 0, 1)) ** 2))
             print(f"{name} {label} {paper_error(image, truth[kind]):.5f} {naive:.5f} "
-                  f"{two_part_l1(shown, a, b, variance, xy, width):.5f} {rms:.5f} "
-                  f"{true_rms:.5f}", flush=True)
+                  f"{two_part:.5f} {rms:.5f} {true_rms:.5f}", flush=True)
         params, pattern = MRTParams(), grid_pattern(width, height, MRTParams().sample_fraction)
         shares = []
         for k in range(4):  # the first compiles and warms up

@@ -361,9 +361,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         progress.trace_s += spent
         pass_s = spent / round_size
         progress.spp = passes.count
-        if estimates and denoise and progress.history and 2 * passes.count > max_spp:
-            # the last round (the next would pass the cap): its estimate would
-            # change no decision, so the earlier rounds' predict its error
+        next_size = passes.count  # the next round doubles the passes
+        at_cap = passes.count + next_size > max_spp  # this round is the last
+        if estimates and denoise and progress.history and at_cap:
+            # its estimate would change no decision: the earlier rounds' predict it
             progress.predicted = predict(progress.history, passes.count)
         elif estimates:
             begin = time.perf_counter()
@@ -382,8 +383,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             if reason:
                 progress.stopped = reason
                 return None, None, progress
-        next_size = passes.count  # the next round doubles the passes
-        if passes.count + next_size > max_spp:
+        if at_cap:
             progress.stopped = f"reached {passes.count} spp"
             break
         if deadline is not None and (time.perf_counter() + ROUND_SAFETY * next_size * pass_s
