@@ -159,11 +159,8 @@ def _read_sums(sums, radiance: bool = True) -> _Developed:
     second = rows(5, 8) * per_weight
     # a sample's NaN or Inf: reported by the caller's check, as a full render's
     rgb[:, np.asarray(sums[12]) > 0.0] = np.nan
-    variance = second - rgb ** 2
-    # below this it is the float32 sums' rounding (a single sample's is all rounding)
-    variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
     return _Developed(pixels(rgb), np.asarray(sums[3], dtype=np.float64) * per_weight,
-                      pixels(variance), albedo, normal, odd)
+                      pixels(_variance(second, rgb)), albedo, normal, odd)
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -237,9 +234,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
         sums = list(np.ascontiguousarray((sums if in_order else sums[index]).T))
-    else:  # (a channel of literal zeros is one value: broadcast)
-        sums = [np.broadcast_to(np.asarray(total), (n,)) for total in sums]
-    return _read_sums(sums, integrator is not None)
+        return _read_sums(sums, integrator is not None)
+    return _unpacked(sums, n)
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
@@ -324,8 +320,65 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     sums = [dr.zeros(mi.Float, n) for _ in values]
     for total, value in zip(sums, values):
         dr.scatter_reduce(dr.ReduceOp.Add, total, value, owner, mode=dr.ReduceMode.Local)
-    dr.eval(sums)
-    return sums
+    return _packed(_developed_channels(sums, integrator is not None), n)
+
+
+def _developed_channels(sums: list, radiance: bool) -> list:
+    """:func:`_read_sums`'s values as Dr.Jit channels, from the sums'
+    (float32, in the kernel): RGB (3), alpha, the mean square (3), albedo
+    (3), normal (3), and with the halves' sums the odd samples' RGB (3)."""
+    def per(weight):  # 0 where nothing was accumulated
+        return dr.select(weight != 0.0, 1.0 / dr.select(weight != 0.0, weight, 1.0), 0.0)
+
+    per_albedo_weight = per(dr.maximum(sums[11], 0.0))
+    albedo = [dr.clip(c * per_albedo_weight, 0.0, 1.0) for c in sums[8:11]]
+    normal = [dr.clip(c * per_albedo_weight, -1.0, 1.0) for c in sums[13:16]]
+    if not radiance:
+        zero = dr.zeros(mi.Float, dr.width(sums[0]))
+        return [zero] * 7 + albedo + normal
+    per_weight = per(sums[4])
+    rgb = [c * per_weight for c in sums[0:3]]
+    second = [c * per_weight for c in sums[5:8]]
+    # a sample's NaN or Inf: reported by the caller's check, as a full render's
+    rgb = [dr.select(sums[12] > 0.0, dr.nan, c) for c in rgb]
+    out = rgb + [sums[3] * per_weight] + second + albedo + normal
+    if len(sums) > _CHANNELS:  # the odd-numbered samples' own mean
+        per_odd = per(sums[_CHANNELS + 3])
+        out += [c * per_odd for c in sums[_CHANNELS:_CHANNELS + 3]]
+    return out
+
+
+def _packed(channels: list, n: int):
+    """``channels`` (each ``n`` values) as one array, pixel-major: one
+    transfer to NumPy, already in the ``(n, k)`` layout the fields take."""
+    k = len(channels)
+    out = dr.zeros(mi.Float, n * k)
+    index = dr.arange(mi.UInt32, n) * k
+    for j, channel in enumerate(channels):
+        dr.scatter(out, channel, index + j)
+    dr.eval(out)
+    return out
+
+
+def _unpacked(packed, n: int) -> _Developed:
+    """The :class:`_Developed` of :func:`_packed`'s array (float64 fields)."""
+    values = np.asarray(packed).reshape(n, -1)
+
+    def field(first, stop):
+        return np.array(values[:, first:stop], dtype=np.float64)
+
+    rgb, second = field(0, 3), field(4, 7)
+    odd = field(13, 16) if values.shape[1] > 13 else None
+    return _Developed(rgb, field(3, 4).reshape(n), _variance(second, rgb), field(7, 10),
+                      field(10, 13), odd)
+
+
+def _variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """A single sample's variance from its mean square and mean (float64)."""
+    variance = second - mean ** 2
+    # below this it is the float32 sums' rounding (a single sample's is all rounding)
+    variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
+    return variance
 
 
 def _new_block(film, rfilter, halves: bool = False) -> mi.ImageBlock:
