@@ -13,7 +13,7 @@ Example::
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import drjit as dr
 import mitsuba as mi
@@ -186,6 +186,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             return _passes_result(outcome, tracer, params, start)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
+        tracer = replace(tracer, spp=choice.spp)
     if pattern is None:  # (a plan's pilot has made it already)
         pattern = grid_pattern(width, height, params.sample_fraction)
     return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet)

@@ -8,7 +8,10 @@ on until the estimated error meets ``noise_threshold`` (default: the full
 render's own noise at the scene's spp, or half the scene's spp, where one
 more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
-full render, which is exact) or, for a threshold asked for, a
+full render, which is exact), a time limit leaves too little for OIDN on
+the whole image after the first pass (then a *preview*: mode ``fast`` at
+one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for a
+threshold asked for, a
 round (the third on) predicts that meeting it in passes costs more than a
 full render:
 then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the
@@ -27,7 +30,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
-from ..recon.denoise import oidn_available
+from ..recon.denoise import denoise_seconds, oidn_available
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
@@ -55,6 +58,11 @@ DEFAULT_SPP_SHARE = 0.5
 #: its cost grows with them, and a noisy scene is noisy in nearly every one
 #: (one it misses is rendered in full: ``mi.render``'s image, not denoised).
 PROBE_PIXELS = 1024
+#: The plan where one pass and OIDN on the whole image would overrun a time
+#: limit: the MRT's cheapest image, a tenth of the pixels' samples (its
+#: grid, one sample each) denoised and reconstructed.
+PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
+PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
 
 
 @dataclass
@@ -113,7 +121,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
 
     def stop_early(progress: Progress, pass_s: float):
         """Whether passes are the wrong plan for the target: the reason, or None."""
-        if deadline is not None or not denoise:
+        if deadline is not None:  # (later rounds leave OIDN its time)
+            return None if progress.spp > FIRST_ROUND else _preview_due(
+                started + limit, width * height, params.denoise_quality, denoise)
+        if not denoise:
             return None
         target = params.noise_threshold or progress.full_error
         if target > 0 and (params.noise_threshold is None
@@ -151,7 +162,21 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
                     passes=list(progress.history))
         return AutoOutcome(plan, image, alpha, progress)
+    if progress.stopped == PREVIEW_REASON:
+        return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes,
+                                pilot_s=progress.trace_s + progress.estimate_s,
+                                passes=list(progress.history)))
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def _preview_due(end: float, pixels: int, quality: str, denoise: bool) -> str | None:
+    """:data:`PREVIEW_REASON` where OIDN on ``pixels`` (its cost known from
+    an earlier call) would end after ``end`` (a ``time.perf_counter()``
+    value), else None."""
+    seconds = denoise_seconds(pixels, quality) if denoise else None
+    if seconds is not None and time.perf_counter() + seconds > end:
+        return PREVIEW_REASON
+    return None
 
 
 def noise_free(tracer, width: int, height: int) -> bool:

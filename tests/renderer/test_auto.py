@@ -196,7 +196,23 @@ def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
     assert result.params.denoise == "oidn" and result.timings.denoise > 0
 
 
-def test_a_time_limit_below_a_round_ends_after_the_first(scene):
+def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
+    release()  # OIDN's cost unknown: the first round's estimate measures it
+    result = mitsuba_mrt.render(scene, time_limit=1e-6)
+    plan = result.auto
+    assert plan.reason == auto.PREVIEW_REASON and plan.choice == auto.PREVIEW
+    assert result.mode == "auto" and result.mode_used == "fast" and result.spp == 1
+    assert result.params.denoise == "oidn" and result.timings.denoise > 0
+    assert plan.time_limit == 1e-6 and len(plan.passes) == 1
+    assert np.isfinite(result.image).all() and result.traced.grid > 0
+    # known now: one pass, no estimate, then the preview
+    again = mitsuba_mrt.render(scene, time_limit=1e-6)
+    assert again.auto.reason == auto.PREVIEW_REASON and again.auto.passes == []
+
+
+def test_a_time_limit_below_a_round_ends_after_the_first(scene, monkeypatch):
+    # without the preview (which a limit this small gets) the first pass is denoised
+    monkeypatch.setattr(auto, "_preview_due", lambda *args: None)
     release()  # OIDN's cost unknown: the first round estimates the error, and it
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
