@@ -22,8 +22,8 @@ from .recon.sampling import check_fraction
 
 #: Denoisers the traced grid can go through before the reconstruction.
 DENOISERS = ("none", "oidn")
-#: OIDN's quality presets, fastest first.
-DENOISE_QUALITIES = QUALITIES
+#: ``denoise_quality``'s settings: ``auto``, then OIDN's presets, fastest first.
+DENOISE_QUALITIES = ("auto",) + QUALITIES
 
 
 @dataclass(frozen=True)
@@ -52,10 +52,12 @@ class MRTParams:
         Open Image Denoise, with the trace's albedo and normals); ``refine``
         then denoises its whole image once more, as its edge pixels are
         traced at the full spp.
-    denoise_quality : {'fast', 'balanced', 'high'}
+    denoise_quality : {'auto', 'fast', 'balanced', 'high'}
         OIDN's quality preset for ``denoise="oidn"``: ``balanced`` and
         ``high`` run a larger network than ``fast``, slower and usually more
-        accurate (docs/BENCHMARKS.md, Denoising).
+        accurate (docs/BENCHMARKS.md, Denoising).  ``auto``: ``fast``, but
+        for the last call of ``auto``'s passes, which takes ``high`` where
+        its extra time buys more than more passes would.
     noise_smoothing : float
         In ``fast``, ``refine`` and ``idpass``, average each traced grid
         value with the neighbours of its id that agree with it within this
@@ -78,7 +80,7 @@ class MRTParams:
     id_rule: str = "auto"
     rbf_degree: int = -1
     denoise: str = "none"
-    denoise_quality: str = "fast"
+    denoise_quality: str = "auto"
     noise_smoothing: float = 1.5
     time_limit: float | None = None
     noise_threshold: float | None = None

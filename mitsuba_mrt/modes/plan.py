@@ -56,6 +56,8 @@ class Candidate:
     compile_s : float
         Predicted seconds of compiling the kernels this candidate needs that
         the process has not compiled yet (counted only against a time limit).
+    quality : str or None
+        OIDN's preset, where the plan chose it (``auto``'s passes).
     """
 
     name: str
@@ -66,11 +68,14 @@ class Candidate:
     seconds: float | None = None
     error: float | None = None
     compile_s: float = 0.0
+    quality: str | None = None
 
     @property
     def label(self) -> str:
-        """``name`` with its spp: ``full+oidn @ 4 spp``."""
-        return f"{self.name} @ {self.spp} spp"
+        """``name`` with its spp (and a chosen preset): ``full+oidn @ 4 spp``,
+        ``full+oidn @ 32 spp, OIDN high``."""
+        return f"{self.name} @ {self.spp} spp" + (f", OIDN {self.quality}" if self.quality
+                                                  else "")
 
 
 @dataclass

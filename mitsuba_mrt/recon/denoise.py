@@ -32,6 +32,18 @@ from .compose import safe_albedo
 #: OIDN's quality presets, fastest first.
 QUALITIES = ("fast", "balanced", "high")
 
+
+def preset(quality: str) -> str:
+    """OIDN's preset for a ``denoise_quality`` setting: ``auto`` is ``fast``
+    (``auto``'s passes choose their last call's preset themselves).
+
+    Examples
+    --------
+    >>> preset("auto"), preset("high")
+    ('fast', 'high')
+    """
+    return "fast" if quality == "auto" else quality
+
 #: The quality :func:`denoise_grid` uses: on a 2-core CPU ``fast`` takes 0.5 to
 #: 0.85 of ``balanced``'s time on the grid of a 400 x 400 image, for an MRT error
 #: about 5 % higher; at few spp time buys more (docs/BENCHMARKS.md, Denoising).

@@ -30,7 +30,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
-from ..recon.denoise import denoise_seconds, oidn_available
+from ..recon.denoise import denoise_seconds, oidn_available, preset
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
@@ -155,7 +155,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
                            seconds=progress.trace_s + progress.denoise_s,
-                           error=progress.predicted)
+                           error=progress.predicted, quality=progress.quality or None)
         plan = Plan(choice, f"{'denoised ' if denoise else ''}passes: {progress.stopped}",
                     target_error=params.noise_threshold or (
                         None if limit is not None else progress.full_error),
@@ -173,7 +173,7 @@ def _preview_due(end: float, pixels: int, quality: str, denoise: bool) -> str | 
     """:data:`PREVIEW_REASON` where OIDN on ``pixels`` (its cost known from
     an earlier call) would end after ``end`` (a ``time.perf_counter()``
     value), else None."""
-    seconds = denoise_seconds(pixels, quality) if denoise else None
+    seconds = denoise_seconds(pixels, preset(quality)) if denoise else None
     if seconds is not None and time.perf_counter() + seconds > end:
         return PREVIEW_REASON
     return None

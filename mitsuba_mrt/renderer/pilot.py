@@ -34,7 +34,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes.plan import Candidate
-from ..recon.denoise import denoise_image, oidn_available
+from ..recon.denoise import denoise_image, oidn_available, preset
 from ..recon.metrics import relative_error
 from ..recon.sampling import SamplePattern
 from ..runtime.jit import compile_seconds
@@ -272,7 +272,7 @@ def _denoised(ref: Reference, strips: list, width: int, ladder: list, params: MR
         begin = time.perf_counter()
         image = denoise_image(radiance.reshape(shape), albedo.reshape(shape),
                               ladder[0].normal.reshape(shape),
-                              quality=params.denoise_quality).reshape(-1, 3)
+                              quality=preset(params.denoise_quality)).reshape(-1, 3)
         calls.append((time.perf_counter() - begin) / len(radiance))
         made.append((s, image))
     # OIDN's first calls set up its device and filter: the fastest call is its cost

@@ -16,7 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes import OUTPUT_DENOISED_MODES, reconstruct
-from ..recon.denoise import denoise_grid, denoise_image, textured_pixels
+from ..recon.denoise import denoise_grid, denoise_image, preset, textured_pixels
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer
 from .scene_query import diffuse_shapes
@@ -70,7 +70,7 @@ def denoise_stage(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
                  & ((trace.radiance > 0.0).any(axis=1) | (trace.shape_index == 0)))
         exact = exact.reshape(pattern.grid_shape)
     radiance = denoise_grid(trace.radiance.reshape(grid), trace.albedo.reshape(grid), normal,
-                            params.denoise, params.denoise_quality,
+                            params.denoise, preset(params.denoise_quality),
                             textured=textured.reshape(pattern.grid_shape), exact=exact)
     return replace(trace, radiance=np.asarray(radiance, dtype=np.float64).reshape(-1, 3))
 
@@ -79,5 +79,5 @@ def finish_stage(recon: Reconstruction, params: MRTParams, mode: str) -> Reconst
     """``recon`` with its whole image denoised once more where ``mode`` asks
     for it (:data:`mitsuba_mrt.modes.OUTPUT_DENOISED_MODES`, with ``denoise``)."""
     if params.denoise != "none" and mode in OUTPUT_DENOISED_MODES:
-        recon.image = denoise_image(recon.image, quality=params.denoise_quality)
+        recon.image = denoise_image(recon.image, quality=preset(params.denoise_quality))
     return recon

@@ -132,7 +132,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
      * - denoise_quality
        - |string|
        - OIDN's quality with ``denoise`` ``oidn``: ``fast``, or ``balanced`` and ``high``,
-         a larger network, slower and usually more accurate (Default: fast).
+         a larger network, slower and usually more accurate; ``auto``: ``fast``, but
+         ``auto``'s passes end with ``high`` where it pays (Default: auto).
      * - noise_smoothing
        - |float|
        - In ``fast``, ``refine`` and ``idpass``: average each traced grid value with

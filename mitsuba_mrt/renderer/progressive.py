@@ -6,7 +6,8 @@ samples, OIDN's guides), and the passes go on in rounds that double their
 number until the denoised image's estimated error meets the target, the
 next round would overrun the time left (then smaller launches fill what is
 left of it), or the spp reach the cap; then the mean of the passes goes
-through OIDN once.  A round is one launch, its odd and even samples its
+through OIDN once (with ``quality="auto"`` at the preset
+:func:`final_quality` picks).  A round is one launch, its odd and even samples its
 two halves (under a time limit, a sampler that compiles kernels per spp
 traces 1-spp launches instead, each into one half).  Blender Cycles'
 time limit and noise threshold work the same way.
@@ -31,7 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..recon.denoise import denoise_image, denoise_seconds
+from ..recon.denoise import denoise_image, denoise_seconds, preset
 from ..recon.metrics import relative_error
 from ..types import SeedStream
 from .scene_query import sampler_bakes_spp
@@ -60,6 +61,10 @@ ROUND_SAFETY = 1.3
 #: and the most pixels they hold in all (a 256 x 256 image's quarter): more
 #: would cost the rounds' OIDN calls without making the estimate surer.
 ESTIMATE_STRIPS, ESTIMATE_PIXELS = 4, 1 << 14
+#: OIDN's ``high`` preset against ``fast``, on these images: how much longer
+#: it takes, and the share of ``fast``'s error it leaves (about the median over
+#: the gallery at 8-32 spp, 256 and 512 px: docs/BENCHMARKS.md).
+HIGH_COST, HIGH_GAIN = 1.9, 0.96
 #: Each pass's radiance is clipped at this for the estimates, as a display
 #: (and the report's metric) clips: a bright sample's excess is noise the
 #: estimates cannot average out.
@@ -163,8 +168,9 @@ class Progress:
     """What the passes did: their spp, seconds, and the estimates on the way.
 
     ``history`` holds (spp of the half that was denoised, its estimated
-    relative error); ``predicted`` the error predicted for the final image;
-    ``stopped`` why the passes ended.
+    relative error); ``predicted`` the error predicted for the final image
+    (denoised at ``fast``); ``stopped`` why the passes ended; ``quality``
+    the preset of the last OIDN call.
     """
 
     spp: int = 0
@@ -175,6 +181,7 @@ class Progress:
     predicted: float | None = None
     full_error: float | None = None
     stopped: str = ""
+    quality: str = ""
 
 
 def rate_of(history: list) -> float:
@@ -227,6 +234,30 @@ def needed_spp(history: list, target: float) -> float:
     if e1 <= target:
         return float(s1)
     return s1 * (e1 / target) ** (1.0 / rate_of(history))
+
+
+def final_quality(trace_s: float, fast_s: float, rate: float,
+                  time_left: float | None = None, high_s: float | None = None) -> str:
+    """The preset of the passes' last OIDN call: ``high`` where its extra time
+    over ``fast`` would take less off the error as more passes than ``high``
+    does, and fits ``time_left``; else ``fast``.
+
+    ``trace_s`` is the passes' tracing time; ``fast_s`` and ``high_s`` what
+    the call takes at either preset (``high_s`` None: :data:`HIGH_COST` times
+    ``fast_s``); more passes' error falls as ``spp ** -rate``
+    (:func:`rate_of`), ``high``'s is :data:`HIGH_GAIN` of ``fast``'s.
+
+    Examples
+    --------
+    >>> final_quality(1.0, 0.1, 0.2), final_quality(0.2, 0.1, 0.2)
+    ('high', 'fast')
+    >>> final_quality(1.0, 0.1, 0.2, time_left=0.05)
+    'fast'
+    """
+    extra = (HIGH_COST * fast_s if high_s is None else high_s) - fast_s
+    if trace_s <= 0 or fast_s <= 0 or (time_left is not None and extra > time_left):
+        return "fast"
+    return "high" if (1 + extra / trace_s) ** -rate > HIGH_GAIN else "fast"
 
 
 def estimate_rows(height: int, width: int) -> np.ndarray:
@@ -286,6 +317,26 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
     return oidn_px
 
 
+def _oidn_s(quality: str, fast_s: float, pixels: int) -> float:
+    """Seconds OIDN takes on ``pixels`` at ``quality``, ``fast_s`` at ``fast``
+    (from an earlier call at ``quality``, or predicted from ``fast_s``)."""
+    if quality == "fast":
+        return fast_s
+    return denoise_seconds(pixels, quality) or HIGH_COST * fast_s
+
+
+def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: float,
+                  time_left: float | None) -> str:
+    """``quality``, or for ``auto`` :func:`final_quality`'s choice."""
+    if quality != "auto":
+        return quality
+    high_s = denoise_seconds(1, "high")
+    fast_px = denoise_seconds(1, "fast")
+    if high_s is not None and fast_px:  # the presets' measured ratio
+        high_s = fast_s * high_s / fast_px
+    return final_quality(trace_s, fast_s, rate_of(progress.history), time_left, high_s)
+
+
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
           pass_s: float, recorded: int, max_spp: int, launch: int, split: bool) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
@@ -336,6 +387,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # A time limit alone needs no estimates once OIDN's cost is known (from an
     # earlier call in this process): the passes fill the time, from 1 spp on,
     # in one half.
+    final, quality = quality, preset(quality)  # (the estimates' preset)
     known = denoise_seconds(n, quality) if denoise else 0.0
     estimates = not (deadline is not None and target_error is None and known is not None)
     if not estimates:
@@ -389,16 +441,22 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         if deadline is not None and (time.perf_counter() + ROUND_SAFETY * next_size * pass_s
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
-            _fill(passes, progress, tracer, xy, deadline - oidn_px * n, pass_s,
-                  launch_spp, max_spp, launch, split and estimates)
+            # the passes fill what the last OIDN call leaves of the time
+            left = max(deadline - time.perf_counter() - oidn_px * n, 0.0)
+            final = _final_preset(final, progress, progress.trace_s + left, oidn_px * n, left)
+            _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_px * n, n),
+                  pass_s, launch_spp, max_spp, launch, split and estimates)
             break
         round_size = next_size
     image = passes.mean
     if denoise:
+        left = None if deadline is None else deadline - time.perf_counter() - oidn_px * n
+        progress.quality = _final_preset(final, progress, progress.trace_s, oidn_px * n, left)
         begin = time.perf_counter()
         albedo, normal = passes.guide()
         image = denoise_image(image.reshape(height, width, 3), albedo.reshape(height, width, 3),
-                              normal.reshape(height, width, 3), quality=quality).reshape(-1, 3)
+                              normal.reshape(height, width, 3),
+                              quality=progress.quality).reshape(-1, 3)
         progress.denoise_s = time.perf_counter() - begin
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)

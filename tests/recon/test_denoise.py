@@ -177,7 +177,8 @@ def test_denoise_quality_is_a_parameter_of_python_and_xml(oidn, variant):
     assert not np.array_equal(fast.trace.radiance, balanced.trace.radiance)
     with pytest.raises(MRTError) as exc:
         MRTParams(denoise_quality="best")
-    assert str(exc.value) == "denoise_quality must be one of fast, balanced, high, got 'best'"
+    assert str(exc.value) == ("denoise_quality must be one of auto, fast, balanced, high, "
+                              "got 'best'")
     xml = small_scene_xml(16, '<integrator type="mrt"><string name="denoise" value="oidn"/>'
                               '<string name="denoise_quality" value="balanced"/>'
                               '<integrator type="path"/></integrator>')

@@ -224,6 +224,26 @@ def test_a_time_limit_below_a_round_ends_after_the_first(scene, monkeypatch):
     assert again.timings.check == 0.0
 
 
+def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
+    chosen = mitsuba_mrt.render(scene).auto.choice
+    assert chosen.kind == "denoised" and chosen.quality in ("fast", "high")
+    assert chosen.label.endswith(f", OIDN {chosen.quality}")
+    asked = mitsuba_mrt.render(scene, denoise_quality="balanced").auto.choice
+    assert asked.quality == "balanced"
+
+
+def test_high_pays_where_its_extra_time_is_small_beside_the_passes():
+    from mitsuba_mrt.renderer.progressive import HIGH_COST, HIGH_GAIN, final_quality
+
+    fast_s, rate = 0.1, 0.2
+    # more passes for high's extra time take exactly HIGH_GAIN off: the tie
+    tie = (HIGH_COST - 1) * fast_s / (HIGH_GAIN ** (-1 / rate) - 1)
+    assert final_quality(1.01 * tie, fast_s, rate) == "high"
+    assert final_quality(0.99 * tie, fast_s, rate) == "fast"
+    assert final_quality(10.0, fast_s, rate, high_s=0.1) == "high"  # (no extra time)
+    assert final_quality(10.0, 0.0, rate) == "fast"  # OIDN's cost unknown
+
+
 def test_a_time_limit_is_filled_with_passes(scene):
     quick = mitsuba_mrt.render(scene, time_limit=1e-6)
     longer = mitsuba_mrt.render(scene, time_limit=50 * quick.timings.total)
