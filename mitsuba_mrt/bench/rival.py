@@ -2,7 +2,8 @@
 
 The alternative: every pixel at a few spp with a box pixel filter, through
 Intel Open Image Denoise with albedo and normal guides from the same
-samples, along an spp ladder (its time-error curve).  Per scene this
+samples, along an spp ladder at OIDN's ``fast`` and ``high`` presets (its
+time-error curve: at each time the lower of the two).  Per scene this
 experiment measures, warm and alternating in one process (median of the
 repeats): the full render at the scene's spp (time 1), the alternative's
 ladder, the default ``auto``, ``auto`` under time limits of
@@ -31,6 +32,9 @@ from ..recon.metrics import paper_error
 
 #: spp of the alternative's ladder.
 LADDER = (1, 2, 4, 8, 16, 32, 64)
+#: OIDN's presets the alternative runs its ladder at, and the prefix of each
+#: one's methods (``oidn@4``, ``oidn-high@4``).
+ALTERNATIVE = {"fast": "oidn@", "high": "oidn-high@"}
 #: ``auto --time-limit`` as shares of the full render's time.
 LIMITS = (0.1, 0.25, 0.5)
 #: The MRT configurations measured beside ``auto``: (mode, denoise).
@@ -106,11 +110,12 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
              "box": _converged(tracer, width, height, converged_spp, True)}
     ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
 
-    def alternative(s):
-        return lambda: render_denoised(scene, spp=s)
+    def alternative(s, quality):
+        return lambda: render_denoised(scene, spp=s, quality=quality)
 
     methods = {"full": lambda: render_reference(scene, spp=spp)}
-    methods.update({f"oidn@{s}": alternative(s) for s in ladder})
+    for quality, prefix in ALTERNATIVE.items():
+        methods.update({f"{prefix}{s}": alternative(s, quality) for s in ladder})
     methods["auto"] = lambda: render(scene, mode="auto")
     for m, d in CONFIGS:
         methods[f"{m}+{d}" if d != "none" else m] = (
@@ -135,7 +140,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     rows = []
     for k, out in outputs.items():
         if isinstance(out, tuple):  # render_reference's, render_denoised's
-            image, used = out[0], "full+oidn" if k.startswith("oidn@") else "full"
+            image, used = out[0], "full+oidn" if k.startswith("oidn") else "full"
         else:
             image, used = out.image, out.mode_used
         kind = "box" if used == "full+oidn" else "film"
@@ -143,7 +148,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
         chose = ""
         if not isinstance(out, tuple) and out.auto is not None:
             chose = out.auto.choice.label
-        spp_used = int(k.split("@")[1]) if k.startswith("oidn@") else (
+        spp_used = int(k.split("@")[1]) if k.startswith("oidn") else (
             spp if k == "full" else int(out.spp))
         rows.append(Row(name, k, spp_used, seconds,
                         seconds / full_s, paper_error(image, truth[kind]),
@@ -151,15 +156,31 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     return rows
 
 
-def at_time(rows: list[Row], prefix: str, seconds: float, metric: str = "error") -> float:
+def at_time(rows: list[Row], prefix: str, seconds: float, metric: str = "error",
+            before: float | None = None) -> float:
     """The ``metric`` (a :class:`Row` field) of the methods named ``prefix...``
     at ``seconds``, interpolated on their curve (log time, log metric); their
-    extreme beyond its ends."""
+    extreme beyond its ends, or ``before`` (if given) before its first."""
     curve = sorted((r.relative_time, getattr(r, metric)) for r in rows
                    if r.method.startswith(prefix))
+    if before is not None and seconds < curve[0][0]:
+        return before
     t = np.log([c[0] for c in curve])
     e = np.log([max(c[1], 1e-12) for c in curve])
     return float(np.exp(np.interp(np.log(seconds), t, e)))
+
+
+def alternative_at(rows: list[Row], seconds: float, metric: str = "error") -> float:
+    """The alternative's ``metric`` at ``seconds``: the lower of its presets'
+    curves (:func:`at_time`; the ``fast`` curve's 1-spp end stands for any
+    shorter time, the others count only from their first point)."""
+    presets = [p for p in ALTERNATIVE.values() if any(r.method.startswith(p) for r in rows)]
+    return min(at_time(rows, p, seconds, metric, None if k == 0 else math.inf)
+               for k, p in enumerate(presets))
+
+
+def _alternative(method: str) -> bool:
+    return method.startswith(tuple(ALTERNATIVE.values()))
 
 
 def verdicts(rows: list[Row]) -> list[dict]:
@@ -169,15 +190,15 @@ def verdicts(rows: list[Row]) -> list[dict]:
     for scene in dict.fromkeys(r.scene for r in rows):
         mine = [r for r in rows if r.scene == scene]
         auto = next(r for r in mine if r.method == "auto")
-        alt = at_time(mine, "oidn@", auto.relative_time)
-        field = {m: at_time(mine, "oidn@", auto.relative_time, m) for m in ("rel_mse", "flip")}
+        alt = alternative_at(mine, auto.relative_time)
+        field = {m: alternative_at(mine, auto.relative_time, m) for m in ("rel_mse", "flip")}
         best = min((r.error for r in mine if r.relative_time <= auto.relative_time
                     and not r.method.startswith("auto")), default=float("nan"))
         limits = {}
         for r in mine:
             if r.method.startswith("auto --time-limit"):
                 share = float(r.method.rsplit(" ", 1)[1])
-                best_in = min((x.error for x in mine if x.method.startswith("oidn@")
+                best_in = min((x.error for x in mine if _alternative(x.method)
                                and x.relative_time <= share), default=float("nan"))
                 limits[share] = (r.relative_time / share, r.error, best_in)
         out.append(dict(scene=scene, auto=auto, alternative=alt, best=best, limits=limits,
@@ -226,12 +247,14 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.0), squeeze=False)
     for ax, scene in zip(axes[0], scenes):
         mine = [r for r in rows if r.scene == scene]
-        alt = sorted((r.relative_time, r.error) for r in mine if r.method.startswith("oidn@"))
-        ax.plot(*zip(*alt), "o-", color="0.5", label="full + OIDN (box)")
+        for (quality, prefix), shade in zip(ALTERNATIVE.items(), ("0.5", "0.75")):
+            alt = sorted((r.relative_time, r.error) for r in mine if r.method.startswith(prefix))
+            if alt:
+                ax.plot(*zip(*alt), "o-", color=shade, label=f"full + OIDN {quality} (box)")
         for r in mine:
             if r.method.startswith("auto"):
                 ax.plot(r.relative_time, r.error, "r*" if r.method == "auto" else "rx")
-            elif not r.method.startswith("oidn@"):
+            elif not _alternative(r.method):
                 ax.plot(r.relative_time, r.error, "b." if r.method != "full" else "ks")
         ax.set_xscale("log")
         ax.set_yscale("log")

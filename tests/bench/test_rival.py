@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from mitsuba_mrt.bench.rival import Row, at_time, rel_mse, run_rival, verdicts
+from mitsuba_mrt.bench.rival import Row, alternative_at, at_time, rel_mse, run_rival, verdicts
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -23,6 +23,17 @@ def test_the_alternative_is_interpolated_on_its_curve_in_log_log():
     # halfway (in log time) between 0.1 and 0.4: the geometric mean of the errors
     assert at_time(rows(), "oidn@", 0.2) == pytest.approx((0.04 * 0.02) ** 0.5)
     assert at_time(rows(), "oidn@", 0.01) == pytest.approx(0.04)  # beyond the ends: the end
+
+
+def test_the_alternative_is_the_lower_of_its_presets_curves():
+    high = [Row("s", f"oidn-high@{spp}", spp, 0.0, t, e, 0.0) for spp, t, e in
+            ((4, 0.5, 0.015), (16, 1.7, 0.009))]
+    both = rows() + high
+    assert alternative_at(both, 0.2) == pytest.approx(at_time(rows(), "oidn@", 0.2))  # before high
+    assert alternative_at(both, 0.5) == pytest.approx(0.015)  # high's point, below fast's curve
+    assert alternative_at(both, 3.0) == pytest.approx(0.009)  # both beyond their ends
+    (v,) = verdicts(both)
+    assert v["limits"][0.25][2] == 0.04  # within the limit: fast's 1 spp alone
 
 
 def test_verdicts_compare_auto_with_the_alternative_and_hindsight():
@@ -50,7 +61,7 @@ def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant):
     lines = (tmp_path / "rival.csv").read_text().splitlines()
     methods = {line.split(",")[1] for line in lines[1:]}
     assert lines[0].split(",")[7] == "flip"
-    assert {"full", "oidn@1", "oidn@4", "auto", "fast", "refine+oidn",
+    assert {"full", "oidn@1", "oidn@4", "oidn-high@4", "auto", "fast", "refine+oidn",
             "auto --time-limit 0.1"} <= methods
 
 
