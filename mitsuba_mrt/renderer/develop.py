@@ -235,7 +235,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
         sums = list(np.ascontiguousarray((sums if in_order else sums[index]).T))
         return _read_sums(sums, integrator is not None)
-    return _unpacked(sums, n)
+    return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves))
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
@@ -320,28 +320,27 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     sums = [dr.zeros(mi.Float, n) for _ in values]
     for total, value in zip(sums, values):
         dr.scatter_reduce(dr.ReduceOp.Add, total, value, owner, mode=dr.ReduceMode.Local)
-    return _packed(_developed_channels(sums, integrator is not None), n)
+    return _packed(_developed_channels(sums, integrator is not None, albedo), n)
 
 
-def _developed_channels(sums: list, radiance: bool) -> list:
+def _developed_channels(sums: list, radiance: bool, albedo: bool) -> list:
     """:func:`_read_sums`'s values as Dr.Jit channels, from the sums'
-    (float32, in the kernel): RGB (3), alpha, the mean square (3), albedo
-    (3), normal (3), and with the halves' sums the odd samples' RGB (3)."""
+    (float32, in the kernel), those traced alone: with ``radiance`` the RGB
+    (3), alpha and the mean square (3); with ``albedo`` the albedo (3) and
+    normal (3); with the halves' sums the odd samples' RGB (3)."""
     def per(weight):  # 0 where nothing was accumulated
         return dr.select(weight != 0.0, 1.0 / dr.select(weight != 0.0, weight, 1.0), 0.0)
 
-    per_albedo_weight = per(dr.maximum(sums[11], 0.0))
-    albedo = [dr.clip(c * per_albedo_weight, 0.0, 1.0) for c in sums[8:11]]
-    normal = [dr.clip(c * per_albedo_weight, -1.0, 1.0) for c in sums[13:16]]
-    if not radiance:
-        zero = dr.zeros(mi.Float, dr.width(sums[0]))
-        return [zero] * 7 + albedo + normal
-    per_weight = per(sums[4])
-    rgb = [c * per_weight for c in sums[0:3]]
-    second = [c * per_weight for c in sums[5:8]]
-    # a sample's NaN or Inf: reported by the caller's check, as a full render's
-    rgb = [dr.select(sums[12] > 0.0, dr.nan, c) for c in rgb]
-    out = rgb + [sums[3] * per_weight] + second + albedo + normal
+    out = []
+    if radiance:
+        per_weight = per(sums[4])
+        # a sample's NaN or Inf: reported by the caller's check, as a full render's
+        out += [dr.select(sums[12] > 0.0, dr.nan, c * per_weight) for c in sums[0:3]]
+        out += [c * per_weight for c in sums[3:4] + sums[5:8]]
+    if albedo:
+        per_albedo_weight = per(dr.maximum(sums[11], 0.0))
+        out += [dr.clip(c * per_albedo_weight, 0.0, 1.0) for c in sums[8:11]]
+        out += [dr.clip(c * per_albedo_weight, -1.0, 1.0) for c in sums[13:16]]
     if len(sums) > _CHANNELS:  # the odd-numbered samples' own mean
         per_odd = per(sums[_CHANNELS + 3])
         out += [c * per_odd for c in sums[_CHANNELS:_CHANNELS + 3]]
@@ -360,17 +359,23 @@ def _packed(channels: list, n: int):
     return out
 
 
-def _unpacked(packed, n: int) -> _Developed:
-    """The :class:`_Developed` of :func:`_packed`'s array (float64 fields)."""
-    values = np.asarray(packed).reshape(n, -1)
+def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool) -> _Developed:
+    """The :class:`_Developed` of :func:`_packed`'s array of
+    :func:`_developed_channels` (float64 fields; zeros where not traced)."""
+    values, at = np.asarray(packed).reshape(n, -1), [0]
 
-    def field(first, stop):
-        return np.array(values[:, first:stop], dtype=np.float64)
+    def take(k):  # the next k channels
+        first = at[0]
+        at[0] += k
+        return np.array(values[:, first:first + k], dtype=np.float64)
 
-    rgb, second = field(0, 3), field(4, 7)
-    odd = field(13, 16) if values.shape[1] > 13 else None
-    return _Developed(rgb, field(3, 4).reshape(n), _variance(second, rgb), field(7, 10),
-                      field(10, 13), odd)
+    zeros = np.zeros((n, 3))
+    rgb, alpha, second = (take(3), take(1).reshape(n), take(3)) if radiance else (
+        zeros, np.zeros(n), None)
+    variance = zeros.copy() if second is None else _variance(second, rgb)
+    guide = (take(3), take(3)) if albedo else (zeros.copy(), zeros.copy())
+    odd = take(3) if halves else None
+    return _Developed(rgb, alpha, variance, *guide, odd)
 
 
 def _variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
