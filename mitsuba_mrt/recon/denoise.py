@@ -65,7 +65,7 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
 
 _lock = threading.Lock()
 # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter;
-# "seconds": quality -> seconds per pixel of the last filter's execution
+# "seconds": quality -> {pixels: seconds of the last execution at that size}
 _state: dict = {}
 
 
@@ -98,10 +98,17 @@ def release() -> None:
 
 def denoise_seconds(pixels: int, quality: str) -> float | None:
     """The seconds :func:`denoise_image` is expected to take on ``pixels``
-    pixels at ``quality``: the last call's rate, its filter's set-up left out
-    (None before any call at ``quality`` in this process)."""
-    rate = _state.get("seconds", {}).get(quality)
-    return None if rate is None else rate * pixels
+    pixels at ``quality``: the last call's on that many, else the largest
+    image's time scaled to ``pixels``, its filter's set-up left out (None
+    before any call at ``quality`` in this process).  A small image costs
+    more per pixel (OIDN's fixed costs), so the largest says most of a large one."""
+    table = _state.get("seconds", {}).get(quality)
+    if not table:
+        return None
+    if pixels in table:
+        return table[pixels]
+    largest = max(table)
+    return table[largest] * pixels / largest
 
 
 def _device(oidn):
@@ -166,8 +173,8 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
                 flt.commit()  # (a new filter's set-up, kept out of the time below)
                 begin = time.perf_counter()
                 flt.execute()
-                _state.setdefault("seconds", {})[quality] = (
-                    (time.perf_counter() - begin) / (output.shape[0] * output.shape[1]))
+                _state.setdefault("seconds", {}).setdefault(quality, {})[
+                    output.shape[0] * output.shape[1]] = time.perf_counter() - begin
             finally:  # the filter holds raw pointers to these arrays: point it away from them
                 for name in images:
                     flt.unset_image(name)

@@ -9,8 +9,9 @@ render's own noise at the scene's spp, or half the scene's spp, where one
 more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
 full render, which is exact), a time limit leaves too little for OIDN on
-the whole image after the first pass (then a *preview*: mode ``fast`` at
-one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for a
+the whole image after one pass (known from an earlier render of the scene
+in the process, or measured by the first; then a *preview*: mode ``fast``
+at one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for a
 threshold asked for, a
 round (the third on) predicts that meeting it in passes costs more than a
 full render:
@@ -34,7 +35,7 @@ from ..recon.denoise import denoise_seconds, oidn_available, preset
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
-from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
+from .progressive import FIRST_ROUND, Progress, needed_spp, pass_seconds, run_passes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -117,6 +118,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
+    pass_s = None if limit is None else pass_seconds(tracer, width * height)
+    if pass_s is not None and _preview_due(started + limit - pass_s, width * height,
+                                           params.denoise_quality, denoise):
+        return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes))
     costs = {}
 
     def stop_early(progress: Progress, pass_s: float):

@@ -35,6 +35,7 @@ import numpy as np
 from ..recon.denoise import denoise_image, denoise_seconds, preset
 from ..recon.metrics import relative_error
 from ..types import SeedStream
+from .replay import recordings
 from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
@@ -69,6 +70,22 @@ HIGH_COST, HIGH_GAIN = 1.9, 0.96
 #: (and the report's metric) clips: a bright sample's excess is noise the
 #: estimates cannot average out.
 ESTIMATE_CLIP = 1.0
+
+
+#: Seconds of one pass (1 spp, with the guides) over every pixel, per traced
+#: objects and pixel count, from the last render in passes of them in this
+#: process: ``auto`` reads it to tell a time limit no pass fits before tracing one.
+_pass_seconds: dict = {}
+
+
+def pass_seconds(tracer, pixels: int) -> float | None:
+    """What one pass of ``tracer``'s objects over ``pixels`` pixels took in
+    this process's last render in passes of them (None: none yet)."""
+    return _pass_seconds.get(_pass_key(tracer, pixels))
+
+
+def _pass_key(tracer, pixels: int) -> tuple:
+    return id(tracer.scene), id(tracer.sensor), id(tracer.integrator), pixels
 
 
 @dataclass
@@ -326,15 +343,13 @@ def _oidn_s(quality: str, fast_s: float, pixels: int) -> float:
 
 
 def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: float,
-                  time_left: float | None) -> str:
-    """``quality``, or for ``auto`` :func:`final_quality`'s choice."""
+                  time_left: float | None, pixels: int) -> str:
+    """``quality``, or for ``auto`` :func:`final_quality`'s choice for an
+    image of ``pixels``."""
     if quality != "auto":
         return quality
-    high_s = denoise_seconds(1, "high")
-    fast_px = denoise_seconds(1, "fast")
-    if high_s is not None and fast_px:  # the presets' measured ratio
-        high_s = fast_s * high_s / fast_px
-    return final_quality(trace_s, fast_s, rate_of(progress.history), time_left, high_s)
+    return final_quality(trace_s, fast_s, rate_of(progress.history), time_left,
+                         denoise_seconds(pixels, "high"))
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
@@ -400,7 +415,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # instead (a new spp's compilation would overrun it), a half a launch
     split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
     while True:
-        begin = time.perf_counter()
+        begin, recorded = time.perf_counter(), recordings()
         if split:
             _trace_pass(passes, tracer, xy, round_size, launch, None if estimates else 0)
             launch, launch_spp = launch + 1, round_size
@@ -412,6 +427,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
+        if passes.count == round_size and recordings() == recorded:
+            # the first round (its passes traced the guides), replayed: no recording's cost
+            _pass_seconds[_pass_key(tracer, n)] = pass_s
         progress.spp = passes.count
         next_size = passes.count  # the next round doubles the passes
         at_cap = passes.count + next_size > max_spp  # this round is the last
@@ -421,6 +439,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         elif estimates:
             begin = time.perf_counter()
             oidn_px = _estimate(passes, progress, width, quality, full_spp, area, denoise)
+            if denoise:  # the whole image's own cost where an earlier call measured it
+                oidn_px = denoise_seconds(n, quality) / n
             progress.estimate_s += time.perf_counter() - begin
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
@@ -443,7 +463,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             progress.stopped = "the time limit"
             # the passes fill what the last OIDN call leaves of the time
             left = max(deadline - time.perf_counter() - oidn_px * n, 0.0)
-            final = _final_preset(final, progress, progress.trace_s + left, oidn_px * n, left)
+            final = _final_preset(final, progress, progress.trace_s + left, oidn_px * n, left, n)
             _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_px * n, n),
                   pass_s, launch_spp, max_spp, launch, split and estimates)
             break
@@ -451,7 +471,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     image = passes.mean
     if denoise:
         left = None if deadline is None else deadline - time.perf_counter() - oidn_px * n
-        progress.quality = _final_preset(final, progress, progress.trace_s, oidn_px * n, left)
+        progress.quality = _final_preset(final, progress, progress.trace_s, oidn_px * n, left,
+                                         n)
         begin = time.perf_counter()
         albedo, normal = passes.guide()
         image = denoise_image(image.reshape(height, width, 3), albedo.reshape(height, width, 3),

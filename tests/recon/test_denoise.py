@@ -75,6 +75,12 @@ def test_its_cost_is_known_after_a_call(oidn):
     one = denoise.denoise_seconds(100, "fast")
     assert one > 0 and denoise.denoise_seconds(200, "fast") == pytest.approx(2 * one)
     assert denoise.denoise_seconds(100, "high") is None
+    # a small image's fixed costs do not change what a large one is expected to take
+    large = denoise.denoise_seconds(64 * 64, "fast")
+    denoise_image(np.full((64, 64, 3), 0.5), *_guides((64, 64, 3)), quality="fast")
+    measured = denoise.denoise_seconds(64 * 64, "fast")
+    denoise_image(image, *_guides(image.shape), quality="fast")
+    assert denoise.denoise_seconds(64 * 64, "fast") == measured != large
 
 
 def test_missing_extra_is_a_one_line_error(monkeypatch):
