@@ -58,6 +58,9 @@ class Candidate:
         the process has not compiled yet (counted only against a time limit).
     quality : str or None
         OIDN's preset, where the plan chose it (``auto``'s passes).
+    shading : bool
+        Whether OIDN saw the textured diffuse surfaces as their shading
+        (``auto``'s passes).
     """
 
     name: str
@@ -69,13 +72,15 @@ class Candidate:
     error: float | None = None
     compile_s: float = 0.0
     quality: str | None = None
+    shading: bool = False
 
     @property
     def label(self) -> str:
-        """``name`` with its spp (and a chosen preset): ``full+oidn @ 4 spp``,
-        ``full+oidn @ 32 spp, OIDN high``."""
-        return f"{self.name} @ {self.spp} spp" + (f", OIDN {self.quality}" if self.quality
-                                                  else "")
+        """``name`` with its spp (and what the plan chose of OIDN's):
+        ``full+oidn @ 4 spp``, ``full+oidn @ 32 spp, OIDN high, textures as shading``."""
+        return (f"{self.name} @ {self.spp} spp" + (f", OIDN {self.quality}" if self.quality
+                                                   else "")
+                + (", textures as shading" if self.shading else ""))
 
 
 @dataclass

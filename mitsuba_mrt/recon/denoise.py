@@ -184,6 +184,27 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     return output.astype(np.float64)
 
 
+def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | None,
+                    textured: np.ndarray, quality: str) -> np.ndarray:
+    """``color`` (height, width, 3) denoised by OIDN in one call, the pixels
+    marked ``textured`` (height, width) as their shading: divided by their
+    ``albedo`` (that of the same samples as ``color``: another sample set's
+    would leave their difference in the texture), with a flat albedo guide
+    there, and multiplied back after.
+
+    A textured diffuse surface's radiance is its texture times a smooth
+    shading; OIDN keeps a texture it is shown as a guide only as well as its
+    network can, and the division hands it the smooth part alone.
+    """
+    textured = np.asarray(textured, dtype=bool)[..., None]
+    texture = safe_albedo(albedo)
+    surface = (np.asarray(albedo) > 0).any(axis=-1, keepdims=True) | textured
+    flat = np.where(textured, surface, albedo).astype(np.float64)
+    out = denoise_image(np.where(textured, np.asarray(color, dtype=np.float64) / texture, color),
+                        flat, normal, quality)
+    return np.where(textured, out * texture, out)
+
+
 def textured_pixels(shape_index: np.ndarray, albedo: np.ndarray,
                     diffuse: np.ndarray) -> np.ndarray:
     """Which traced pixels lie on a textured diffuse surface.

@@ -36,6 +36,7 @@ from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, pass_seconds, run_passes
+from .scene_query import textured_diffuse_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -155,12 +156,14 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         tracer, width, height, quality=params.denoise_quality,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=max_spp, full_spp=spp, area=area,
-        denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round)
+        denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round,
+        surfaces=_surfaces(scene, tracer, width, height) if denoise else None)
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
                            seconds=progress.trace_s + progress.denoise_s,
-                           error=progress.predicted, quality=progress.quality or None)
+                           error=progress.predicted, quality=progress.quality or None,
+                           shading=progress.shading)
         plan = Plan(choice, f"{'denoised ' if denoise else ''}passes: {progress.stopped}",
                     target_error=params.noise_threshold or (
                         None if limit is not None else progress.full_error),
@@ -172,6 +175,18 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                 pilot_s=progress.trace_s + progress.estimate_s,
                                 passes=list(progress.history)))
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def _surfaces(scene, tracer, width: int, height: int) -> tuple | None:
+    """(each pixel's shape index, :func:`textured_diffuse_shapes`) where the
+    scene has a textured diffuse surface, else None: the ids of every pixel,
+    one ray through its centre, for the passes to find the textured pixels."""
+    textured = textured_diffuse_shapes(scene)
+    if not textured.any():
+        return None
+    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    ids = tracer(xy, stream=SeedStream.EDGES, radiance=False, albedo=False, replay=True)
+    return ids.shape_index, textured
 
 
 def _preview_due(end: float, pixels: int, quality: str, denoise: bool) -> str | None:

@@ -32,7 +32,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..recon.denoise import denoise_image, denoise_seconds, preset
+from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading, preset,
+                             textured_pixels)
 from ..recon.metrics import relative_error
 from ..types import SeedStream
 from .replay import recordings
@@ -115,6 +116,7 @@ class Passes:
     albedo: np.ndarray | None = None
     normal: np.ndarray | None = None
     alpha: np.ndarray | None = None
+    textured: np.ndarray | None = None
 
     def add(self, trace, half: int | None, guides: bool) -> None:
         """Add ``trace`` (every pixel, at its spp) to half 0 or 1, or, for
@@ -163,6 +165,26 @@ class Passes:
         """(albedo, normal): the means of the samples that traced them."""
         return self.albedo[index] / self.guides, self.normal[index] / self.guides
 
+    @property
+    def shading(self) -> bool:
+        """Whether some pixels lie on textured diffuse surfaces (``textured``):
+        those are denoised as their shading
+        (:func:`~mitsuba_mrt.recon.denoise.denoise_shading`), and every pass
+        traces the guides, as the division wants the albedo of the
+        radiance's own samples."""
+        return self.textured is not None and bool(self.textured.any())
+
+    def denoised(self, color: np.ndarray, index, shape: tuple, quality: str,
+                 shading: bool = False) -> np.ndarray:
+        """``color`` (the pixels ``index``) denoised with the guides; with
+        ``shading``, the textured pixels as their shading."""
+        albedo, normal = (v.reshape(shape) for v in self.guide(index))
+        color = color.reshape(shape)
+        if not shading:
+            return denoise_image(color, albedo, normal, quality=quality).reshape(-1, 3)
+        return denoise_shading(color, albedo, normal, self.textured[index].reshape(shape[:2]),
+                               quality).reshape(-1, 3)
+
     def half_noise(self) -> np.ndarray:
         """The squared noise of half 1's mean per pixel of ``crop`` and channel,
         from the halves' own difference (two independent means of ``a`` and
@@ -187,7 +209,8 @@ class Progress:
     ``history`` holds (spp of the half that was denoised, its estimated
     relative error); ``predicted`` the error predicted for the final image
     (denoised at ``fast``); ``stopped`` why the passes ended; ``quality``
-    the preset of the last OIDN call.
+    the preset of the last OIDN call; ``shading`` whether it denoised the
+    textured diffuse surfaces as their shading.
     """
 
     spp: int = 0
@@ -199,6 +222,7 @@ class Progress:
     full_error: float | None = None
     stopped: str = ""
     quality: str = ""
+    shading: bool = False
 
 
 def rate_of(history: list) -> float:
@@ -322,13 +346,15 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
         return 0.0
     begin = time.perf_counter()
     shape = (len(passes.crop) // width, width, 3)
-    albedo, normal = passes.guide(passes.crop)
-    denoised = denoise_image(passes.half_mean(0).reshape(shape), albedo.reshape(shape),
-                             normal.reshape(shape), quality=quality).reshape(-1, 3)
+    denoised = passes.denoised(passes.half_mean(0), passes.crop, shape, quality)
     oidn_px = (time.perf_counter() - begin) / len(passes.crop)
-    squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
-               - passes.half_noise())
-    progress.history.append((passes.half_counts[0], relative_error(squared, denoised)))
+
+    def error(image):  # against half 1, less its noise
+        squared = (np.clip(image, 0.0, 1.0) - passes.half_mean(1)) ** 2 - passes.half_noise()
+        return relative_error(squared, image)
+
+    plain = error(denoised)
+    progress.history.append((passes.half_counts[0], plain))
     progress.predicted = predict(progress.history, passes.count)
     progress.full_error = relative_error(variance / (full_spp * area), denoised)
     return oidn_px
@@ -376,7 +402,8 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
 def run_passes(tracer, width: int, height: int, *, quality: str,
                target_error: float | None, deadline: float | None, max_spp: int,
                full_spp: int, area: float, denoise: bool = True,
-               stop_early=None, on_round=None) -> tuple[np.ndarray, np.ndarray, Progress]:
+               stop_early=None, on_round=None,
+               surfaces: tuple | None = None) -> tuple[np.ndarray, np.ndarray, Progress]:
     """Trace passes until the target, the deadline or ``max_spp``; return
     (image (height, width, 3), alpha (height, width), :class:`Progress`).
 
@@ -388,7 +415,11 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.  Under a deadline, a
     sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
-    traces every pass at 1 spp, in as many launches.
+    traces every pass at 1 spp, in as many launches.  ``surfaces`` (each
+    pixel's shape index, and per shape index whether it is a textured
+    diffuse surface: :func:`~.scene_query.textured_diffuse_shapes`) lets
+    the last OIDN call denoise the textured pixels as their shading
+    (:attr:`Passes.shading`).
     """
     xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     n = len(xy)
@@ -424,6 +455,11 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             for k in range(round_size):  # a launch a pass, the round's first half into half 0
                 _trace_pass(passes, tracer, xy, 1, launch, 2 * k // round_size)
                 launch += 1
+        if surfaces is not None and denoise and passes.count == passes.guides == launch_spp \
+                and passes.textured is None:  # the first round: the textured pixels
+            passes.textured = textured_pixels(surfaces[0], passes.guide()[0], surfaces[1])
+            if passes.shading:  # the division wants every sample's albedo
+                passes.guide_spp = max_spp
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
@@ -474,10 +510,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         progress.quality = _final_preset(final, progress, progress.trace_s, oidn_px * n, left,
                                          n)
         begin = time.perf_counter()
-        albedo, normal = passes.guide()
-        image = denoise_image(image.reshape(height, width, 3), albedo.reshape(height, width, 3),
-                              normal.reshape(height, width, 3),
-                              quality=progress.quality).reshape(-1, 3)
+        progress.shading = passes.shading and passes.guides == passes.count
+        image = passes.denoised(image, slice(None), (height, width, 3), progress.quality,
+                                progress.shading)
         progress.denoise_s = time.perf_counter() - begin
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)

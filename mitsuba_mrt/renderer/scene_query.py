@@ -207,6 +207,18 @@ def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     return np.array([False] + shows(scene, lambda shape: diffuse(shape.bsdf()), all), dtype=bool)
 
 
+def textured_diffuse_shapes(scene: mi.Scene) -> np.ndarray:
+    """:func:`diffuse_shapes`, only those whose reflectance is not one
+    colour (a bitmap, a procedural texture, ...): those whose radiance a
+    denoiser may be handed as texture times shading."""
+    def varies(bsdf) -> bool:
+        keys = [k for k in mi.traverse(bsdf).keys() if k.startswith("reflectance.")]
+        return bool(keys) and keys != ["reflectance.value"]
+
+    textured = shows(scene, lambda shape: shape.bsdf() is not None and varies(shape.bsdf()))
+    return diffuse_shapes(scene) & np.array([False] + textured, dtype=bool)
+
+
 def ordered_shapes(scene: mi.Scene) -> list:
     """The scene's shapes in id order (natural sort of ``shape.id()``).
 

@@ -80,9 +80,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         the normal at that centre; without: no ids, and the normal of the
         samples' own first hits (a denoiser's guide, as their albedo is).
     albedo : bool
-        With ``aovs`` and ``radiance``: also the samples' albedo; without, it
-        is zero and the samples cost what the integrator's alone do (for
-        pixels whose ids alone are used: ``refine``'s edges).
+        With ``aovs``: also the samples' albedo (without ``radiance``: the id
+        pass's); without, it is zero and the samples cost what the
+        integrator's alone do (for pixels whose ids alone are used:
+        ``refine``'s edges, ``auto``'s textured surfaces).
     halves : bool
         Also the mean radiance of each pixel's odd-numbered samples
         (``odd``): with the even-numbered ones, two estimates of the pixel
@@ -113,9 +114,12 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
             scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
-    if aovs and not radiance:  # the id pass: albedo alone
+    if aovs and not radiance and albedo:  # the id pass: albedo alone
         samples = albedo_pass(develop, scene, sensor, sampler, pixel_xy, seed, replay, box,
                               (shape_index, path_id) if ids else None)
+    elif aovs and not radiance:  # the ids alone
+        samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)),
+                             normal)
     if aovs and not ids:
         normal = samples.normal
     if not (radiance or aovs):

@@ -244,6 +244,22 @@ def test_high_pays_where_its_extra_time_is_small_beside_the_passes():
     assert final_quality(10.0, 0.0, rate) == "fast"  # OIDN's cost unknown
 
 
+def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
+    from mitsuba_mrt.renderer.scene_query import ordered_shapes, textured_diffuse_shapes
+
+    textured_scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/spot_textures.xml",
+                                            res=192, spp=64)  # (enough for a plan)
+    flags = textured_diffuse_shapes(textured_scene)
+    names = [shape.id() for shape in ordered_shapes(textured_scene)]
+    assert dict(zip(names, flags[1:].tolist())) == {
+        "globe": True, "crate": True, "back_wall": False, "floor": True}
+    result = mitsuba_mrt.render(textured_scene)
+    assert result.auto.choice.shading and result.auto.choice.label.endswith("textures as shading")
+    assert np.isfinite(result.image).all()
+    plain = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/cornell.xml", res=192, spp=64)
+    assert not textured_diffuse_shapes(plain).any() and not mitsuba_mrt.render(plain).auto.choice.shading
+
+
 def test_a_time_limit_is_filled_with_passes(scene):
     quick = mitsuba_mrt.render(scene, time_limit=1e-6)
     longer = mitsuba_mrt.render(scene, time_limit=50 * quick.timings.total)
