@@ -73,6 +73,10 @@ HIGH_COST, HIGH_GAIN = 1.9, 0.96
 ESTIMATE_CLIP = 1.0
 
 
+#: Whether the passes denoise the textured diffuse surfaces as their shading
+#: (:attr:`Passes.shading`; ``examples/auto_choices.py`` turns it off to
+#: measure what it gives).
+SHADING = True
 #: Seconds of one pass (1 spp, with the guides) over every pixel, per traced
 #: objects and pixel count, from the last render in passes of them in this
 #: process: ``auto`` reads it to tell a time limit no pass fits before tracing one.
@@ -172,7 +176,7 @@ class Passes:
         (:func:`~mitsuba_mrt.recon.denoise.denoise_shading`), and every pass
         traces the guides, as the division wants the albedo of the
         radiance's own samples."""
-        return self.textured is not None and bool(self.textured.any())
+        return SHADING and self.textured is not None and bool(self.textured.any())
 
     def denoised(self, color: np.ndarray, index, shape: tuple, quality: str,
                  shading: bool = False) -> np.ndarray:
