@@ -98,16 +98,22 @@ def release() -> None:
 
 def denoise_seconds(pixels: int, quality: str) -> float | None:
     """The seconds :func:`denoise_image` is expected to take on ``pixels``
-    pixels at ``quality``: the last call's on that many, else the largest
-    image's time scaled to ``pixels``, its filter's set-up left out (None
-    before any call at ``quality`` in this process).  A small image costs
-    more per pixel (OIDN's fixed costs), so the largest says most of a large one."""
+    pixels at ``quality``, its filter's set-up left out (None before any call
+    at ``quality`` in this process): the last call's on that many pixels;
+    else a line through the last calls' times on the two largest images (a
+    fixed cost and one per pixel), or the one image's time scaled to
+    ``pixels``."""
     table = _state.get("seconds", {}).get(quality)
     if not table:
         return None
     if pixels in table:
         return table[pixels]
-    largest = max(table)
+    sizes = sorted(table)[-2:]
+    largest = sizes[-1]
+    if len(sizes) == 2:
+        slope = (table[sizes[1]] - table[sizes[0]]) / (sizes[1] - sizes[0])
+        if slope > 0:
+            return max(table[largest] + slope * (pixels - largest), 0.0)
     return table[largest] * pixels / largest
 
 

@@ -9,8 +9,8 @@ render's own noise at the scene's spp, or half the scene's spp, where one
 more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
 full render, which is exact), a time limit leaves too little for OIDN on
-the whole image after one pass (known from an earlier render of the scene
-in the process, or measured by the first; then a *preview*: mode ``fast``
+the whole image after one pass (known from an earlier time-limited render
+of the scene in the process, or measured by the first; then a *preview*: mode ``fast``
 at one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for a
 threshold asked for, a
 round (the third on) predicts that meeting it in passes costs more than a
@@ -35,7 +35,8 @@ from ..recon.denoise import denoise_seconds, oidn_available, preset
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from .pilot import effective_area, run_pilot
-from .progressive import FIRST_ROUND, Progress, needed_spp, pass_seconds, run_passes
+from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
+from .replay import recordings
 from .scene_query import textured_diffuse_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
@@ -65,6 +66,16 @@ PROBE_PIXELS = 1024
 #: grid, one sample each) denoised and reconstructed.
 PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
 PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
+#: How far one pass and OIDN may end past a time limit before the preview is
+#: taken instead: the preview's error is several times a pass's, and a limit
+#: is held to within 10 %.
+PREVIEW_SLACK = 1.1
+
+#: Seconds from a time-limited render's start to the end of its first round
+#: of passes, per traced objects and pixel count, from the last such render
+#: in this process whose kernels were all replayed: what tells a limit too
+#: short for one pass and OIDN before a pass is traced.
+_first_round_s: dict = {}
 
 
 @dataclass
@@ -119,17 +130,24 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
-    pass_s = None if limit is None else pass_seconds(tracer, width * height)
-    if pass_s is not None and _preview_due(started + limit - pass_s, width * height,
-                                           params.denoise_quality, denoise):
+    key, recorded = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height), \
+        recordings()
+    first_s = _first_round_s.get(key) if limit is not None else None
+    if first_s is not None and _preview_due(started + PREVIEW_SLACK * limit - first_s,
+                                            width * height, params.denoise_quality, denoise):
         return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes))
     costs = {}
 
     def stop_early(progress: Progress, pass_s: float):
         """Whether passes are the wrong plan for the target: the reason, or None."""
         if deadline is not None:  # (later rounds leave OIDN its time)
-            return None if progress.spp > FIRST_ROUND else _preview_due(
-                started + limit, width * height, params.denoise_quality, denoise)
+            if progress.spp > FIRST_ROUND:
+                return None
+            if recordings() == recorded and not progress.history:
+                # one pass, no estimate, and no recording (whose cost would not come again)
+                _first_round_s[key] = time.perf_counter() - started
+            return _preview_due(started + PREVIEW_SLACK * limit, width * height,
+                                params.denoise_quality, denoise)
         if not denoise:
             return None
         target = params.noise_threshold or progress.full_error

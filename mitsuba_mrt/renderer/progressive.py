@@ -36,7 +36,6 @@ from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading, pr
                              textured_pixels)
 from ..recon.metrics import relative_error
 from ..types import SeedStream
-from .replay import recordings
 from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
@@ -77,22 +76,6 @@ ESTIMATE_CLIP = 1.0
 #: (:attr:`Passes.shading`; ``examples/auto_choices.py`` turns it off to
 #: measure what it gives).
 SHADING = True
-#: Seconds of one pass (1 spp, with the guides) over every pixel, per traced
-#: objects and pixel count, from the last render in passes of them in this
-#: process: ``auto`` reads it to tell a time limit no pass fits before tracing one.
-_pass_seconds: dict = {}
-
-
-def pass_seconds(tracer, pixels: int) -> float | None:
-    """What one pass of ``tracer``'s objects over ``pixels`` pixels took in
-    this process's last render in passes of them (None: none yet)."""
-    return _pass_seconds.get(_pass_key(tracer, pixels))
-
-
-def _pass_key(tracer, pixels: int) -> tuple:
-    return id(tracer.scene), id(tracer.sensor), id(tracer.integrator), pixels
-
-
 @dataclass
 class Passes:
     """Running sums of the passes so far, per pixel (flat, ``(n, 3)``).
@@ -450,7 +433,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # instead (a new spp's compilation would overrun it), a half a launch
     split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
     while True:
-        begin, recorded = time.perf_counter(), recordings()
+        begin = time.perf_counter()
         if split:
             _trace_pass(passes, tracer, xy, round_size, launch, None if estimates else 0)
             launch, launch_spp = launch + 1, round_size
@@ -467,9 +450,6 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
-        if passes.count == round_size and recordings() == recorded:
-            # the first round (its passes traced the guides), replayed: no recording's cost
-            _pass_seconds[_pass_key(tracer, n)] = pass_s
         progress.spp = passes.count
         next_size = passes.count  # the next round doubles the passes
         at_cap = passes.count + next_size > max_spp  # this round is the last

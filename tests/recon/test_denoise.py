@@ -73,7 +73,7 @@ def test_its_cost_is_known_after_a_call(oidn):
     image = np.full((8, 8, 3), 0.5)
     denoise_image(image, *_guides(image.shape), quality="fast")
     one = denoise.denoise_seconds(100, "fast")
-    assert one > 0 and denoise.denoise_seconds(200, "fast") == pytest.approx(2 * one)
+    assert one > 0 and denoise.denoise_seconds(200, "fast") == pytest.approx(2 * one)  # one size
     assert denoise.denoise_seconds(100, "high") is None
     # a small image's fixed costs do not change what a large one is expected to take
     large = denoise.denoise_seconds(64 * 64, "fast")
@@ -81,6 +81,10 @@ def test_its_cost_is_known_after_a_call(oidn):
     measured = denoise.denoise_seconds(64 * 64, "fast")
     denoise_image(image, *_guides(image.shape), quality="fast")
     assert denoise.denoise_seconds(64 * 64, "fast") == measured != large
+    # two sizes: a fixed cost and one per pixel, through both
+    denoise._state["seconds"]["fast"] = {100: 1.0, 400: 2.5}
+    assert denoise.denoise_seconds(1000, "fast") == pytest.approx(2.5 + 0.005 * 600)
+    denoise.release()
 
 
 def test_missing_extra_is_a_one_line_error(monkeypatch):
