@@ -3,8 +3,10 @@
 A few modules keep what is costly to make and the same each time it is
 made: the trace's recorded kernels and the Mitsuba objects held for them,
 a filter or integrator made once per variant, the tables of the pixel
-filters, the OIDN device and filters, interpolation weights.  None of them
-changes a result.  :func:`clear_caches` drops them all, to free what they
+filters, the OIDN device and filters, interpolation weights, and what the
+last renders took (OIDN's calls, ``auto``'s first round under a time
+limit).  None of them changes a result, but for ``auto`` under a time
+limit, which reads those times.  :func:`clear_caches` drops them all, to free what they
 hold or to time a first call again; docs/ARCHITECTURE.md (Process-wide
 state) lists each, with the state that is not a cache and stays.
 """
@@ -12,7 +14,7 @@ state) lists each, with the state that is not a cache and stays.
 from __future__ import annotations
 
 from ..recon import denoise, quadric_jit, rbf_fast
-from . import develop, guides, pixel_filter, replay
+from . import auto, develop, guides, pixel_filter, replay
 
 
 def clear_caches() -> None:
@@ -22,6 +24,7 @@ def clear_caches() -> None:
     kernels again (Dr.Jit's own cache of compiled kernels is not cleared).
     """
     replay.clear_recordings()
+    auto._first_round_s.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()
     pixel_filter._TABLES.clear()
