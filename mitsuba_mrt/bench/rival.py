@@ -140,7 +140,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     rows = []
     for k, out in outputs.items():
         if isinstance(out, tuple):  # render_reference's, render_denoised's
-            image, used = out[0], "full+oidn" if k.startswith("oidn") else "full"
+            image, used = out[0], "full+oidn" if _alternative(k) else "full"
         else:
             image, used = out.image, out.mode_used
         kind = "box" if used == "full+oidn" else "film"
@@ -148,7 +148,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
         chose = ""
         if not isinstance(out, tuple) and out.auto is not None:
             chose = out.auto.choice.label
-        spp_used = int(k.split("@")[1]) if k.startswith("oidn") else (
+        spp_used = int(k.split("@")[1]) if _alternative(k) else (
             spp if k == "full" else int(out.spp))
         rows.append(Row(name, k, spp_used, seconds,
                         seconds / full_s, paper_error(image, truth[kind]),
@@ -174,9 +174,9 @@ def alternative_at(rows: list[Row], seconds: float, metric: str = "error") -> fl
     """The alternative's ``metric`` at ``seconds``: the lower of its presets'
     curves (:func:`at_time`; the ``fast`` curve's 1-spp end stands for any
     shorter time, the others count only from their first point)."""
-    presets = [p for p in ALTERNATIVE.values() if any(r.method.startswith(p) for r in rows)]
-    return min(at_time(rows, p, seconds, metric, None if k == 0 else math.inf)
-               for k, p in enumerate(presets))
+    fast = ALTERNATIVE["fast"]
+    return min(at_time(rows, p, seconds, metric, None if p == fast else math.inf)
+               for p in ALTERNATIVE.values() if any(r.method.startswith(p) for r in rows))
 
 
 def _alternative(method: str) -> bool:

@@ -44,6 +44,7 @@ def preset(quality: str) -> str:
     """
     return "fast" if quality == "auto" else quality
 
+
 #: The quality :func:`denoise_grid` uses: on a 2-core CPU ``fast`` takes 0.5 to
 #: 0.85 of ``balanced``'s time on the grid of a 400 x 400 image, for an MRT error
 #: about 5 % higher; at few spp time buys more (docs/BENCHMARKS.md, Denoising).

@@ -130,8 +130,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
-    key, recorded = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height), \
-        recordings()
+    key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
+    recorded = recordings()
     first_s = _first_round_s.get(key) if limit is not None else None
     if first_s is not None and _preview_due(started + PREVIEW_SLACK * limit - first_s,
                                             width * height, params.denoise_quality, denoise):

@@ -63,8 +63,9 @@ ROUND_SAFETY = 1.3
 #: would cost the rounds' OIDN calls without making the estimate surer.
 ESTIMATE_STRIPS, ESTIMATE_PIXELS = 4, 1 << 14
 #: OIDN's ``high`` preset against ``fast``, on these images: how much longer
-#: it takes, and the share of ``fast``'s error it leaves (about the median over
-#: the gallery at 8-32 spp, 256 and 512 px: docs/BENCHMARKS.md).
+#: its call takes (2 cores, 256-512 px), and the share of ``fast``'s error it
+#: leaves (the median of ``bench rival``'s ``oidn-high@`` over ``oidn@``
+#: errors at 8-32 spp, 256 and 512 px).
 HIGH_COST, HIGH_GAIN = 1.9, 0.96
 #: Each pass's radiance is clipped at this for the estimates, as a display
 #: (and the report's metric) clips: a bright sample's excess is noise the
@@ -76,6 +77,8 @@ ESTIMATE_CLIP = 1.0
 #: (:attr:`Passes.shading`; ``examples/auto_choices.py`` turns it off to
 #: measure what it gives).
 SHADING = True
+
+
 @dataclass
 class Passes:
     """Running sums of the passes so far, per pixel (flat, ``(n, 3)``).
@@ -319,32 +322,24 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
 
 
 def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full_spp: int,
-              area: float, denoise: bool) -> float:
+              area: float, denoise: bool) -> None:
     """Add the round's estimates to ``progress`` (see the module): the error
     of the image denoised from half the passes so far (its history), the
     prediction for all of them, and a full render's own at ``full_spp``;
-    without ``denoise``, the passes' mean's error.  Returns OIDN's seconds
-    per pixel (0 without ``denoise``)."""
+    without ``denoise``, the passes' mean's error."""
     variance = passes.variance
     if not denoise:
         mean = (passes.halves[0] + passes.halves[1]) / passes.count
         progress.predicted = relative_error(variance / passes.count, mean)
         progress.full_error = relative_error(variance / (full_spp * area), mean)
-        return 0.0
-    begin = time.perf_counter()
+        return
     shape = (len(passes.crop) // width, width, 3)
     denoised = passes.denoised(passes.half_mean(0), passes.crop, shape, quality)
-    oidn_px = (time.perf_counter() - begin) / len(passes.crop)
-
-    def error(image):  # against half 1, less its noise
-        squared = (np.clip(image, 0.0, 1.0) - passes.half_mean(1)) ** 2 - passes.half_noise()
-        return relative_error(squared, image)
-
-    plain = error(denoised)
-    progress.history.append((passes.half_counts[0], plain))
+    squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
+               - passes.half_noise())
+    progress.history.append((passes.half_counts[0], relative_error(squared, denoised)))
     progress.predicted = predict(progress.history, passes.count)
     progress.full_error = relative_error(variance / (full_spp * area), denoised)
-    return oidn_px
 
 
 def _oidn_s(quality: str, fast_s: float, pixels: int) -> float:
@@ -442,8 +437,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             for k in range(round_size):  # a launch a pass, the round's first half into half 0
                 _trace_pass(passes, tracer, xy, 1, launch, 2 * k // round_size)
                 launch += 1
-        if surfaces is not None and denoise and passes.count == passes.guides == launch_spp \
-                and passes.textured is None:  # the first round: the textured pixels
+        if surfaces is not None and denoise and passes.textured is None \
+                and passes.count == passes.guides:  # the first round: the textured pixels
             passes.textured = textured_pixels(surfaces[0], passes.guide()[0], surfaces[1])
             if passes.shading:  # the division wants every sample's albedo
                 passes.guide_spp = max_spp
@@ -458,9 +453,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             progress.predicted = predict(progress.history, passes.count)
         elif estimates:
             begin = time.perf_counter()
-            oidn_px = _estimate(passes, progress, width, quality, full_spp, area, denoise)
-            if denoise:  # the whole image's own cost where an earlier call measured it
-                oidn_px = denoise_seconds(n, quality) / n
+            _estimate(passes, progress, width, quality, full_spp, area, denoise)
+            # OIDN's cost on the whole image, from the estimate's call (and earlier ones)
+            oidn_px = denoise_seconds(n, quality) / n if denoise else 0.0
             progress.estimate_s += time.perf_counter() - begin
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
