@@ -1,0 +1,54 @@
+"""``auto --time-limit`` as a user's first render: each render in a fresh process.
+
+    python examples/fresh_time_limit.py two_sensors cornell spot_textures
+
+Per gallery scene at 256 x 256: the full render in three fresh processes
+(median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
+rendering once with ``time_limit``.  Printed: each render's seconds over its
+limit and the plan it chose.  Kernels come from Dr.Jit's disk cache; the
+process has no earlier render to learn OIDN's or a pass's cost from.
+"""
+
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+LIMITS = (0.1, 0.25, 0.5)
+
+#: The child's program: one render, its seconds (and plan) as one JSON line.
+CHILD = """
+import json, sys
+import mitsuba_mrt
+from mitsuba_mrt import runtime
+runtime.configure()
+mitsuba_mrt.activate("auto")
+scene = mitsuba_mrt.load_scene(sys.argv[1], res=256)
+if sys.argv[2] == "full":
+    print(json.dumps({"seconds": mitsuba_mrt.render_reference(scene)[1], "chose": "full"}))
+else:
+    result = mitsuba_mrt.render(scene, time_limit=float(sys.argv[2]))
+    print(json.dumps({"seconds": result.timings.total, "chose": result.auto.choice.label}))
+"""
+
+
+def _child(path: Path, limit: str) -> dict:
+    out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit],
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main():
+    for name in sys.argv[1:]:
+        path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
+        full = statistics.median(_child(path, "full")["seconds"] for _ in range(3))
+        for share in LIMITS:
+            run = _child(path, str(share * full))
+            print(f"{name}: full {full:.3f} s; limit {share}: "
+                  f"{run['seconds'] / (share * full):.2f}x the limit ({run['chose']})", flush=True)
+
+
+if __name__ == "__main__":
+    main()
