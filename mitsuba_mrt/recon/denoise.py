@@ -118,6 +118,25 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
     return table[largest] * pixels / largest
 
 
+#: Seconds OIDN's RT filter takes per pixel and worker thread, with both
+#: guides, before any call in the process has measured it: a little above
+#: what it takes on a 2-core x86 CPU (256-512 px), so that a first
+#: time-limited render plans for a call no faster than it will be.
+PRIOR_SECONDS = {"fast": 1.2e-6, "balanced": 2.1e-6, "high": 2.1e-6}
+
+
+def expected_seconds(pixels: int, quality: str) -> float:
+    """:func:`denoise_seconds`, or before any call at ``quality`` in this
+    process :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker
+    threads (OIDN's threads here)."""
+    seconds = denoise_seconds(pixels, quality)
+    if seconds is not None:
+        return seconds
+    import drjit as dr
+
+    return PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1)
+
+
 def _device(oidn):
     """The process's OIDN CPU device (created and committed on first use)."""
     device = _state.get("device")

@@ -165,13 +165,13 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
-    plan, pattern = None, None
+    plan, pattern, grid = None, None, None
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
             pattern = grid_pattern(width, height, params.sample_fraction)
             outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
-            plan = outcome.plan
+            plan, grid = outcome.plan, outcome.grid
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
         choice = plan.choice
@@ -189,7 +189,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
         tracer = replace(tracer, spp=choice.spp)
     if pattern is None:  # (a plan's pilot has made it already)
         pattern = grid_pattern(width, height, params.sample_fraction)
-    return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet)
+    return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
 
 
 def _quiet(stage: str, done: float) -> None:
@@ -197,9 +197,12 @@ def _quiet(stage: str, done: float) -> None:
 
 
 def _mrt(pattern: SamplePattern, tracer: GridTracer, params: MRTParams, mode: str,
-         plan: Plan | None, start: float, progress) -> MRTResult:
-    """The MRT's pipeline: trace the grid, denoise, reconstruct, finish."""
-    trace = tracer(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
+         plan: Plan | None, start: float, progress, grid: SparseTrace | None = None
+         ) -> MRTResult:
+    """The MRT's pipeline: trace the grid (unless ``grid`` is its trace
+    already), denoise, reconstruct, finish."""
+    trace = grid if grid is not None else tracer(pattern.pixel_xy, stream=SeedStream.GRID,
+                                                 replay=True)
     progress("trace", 0.5)
     made = mrt_image(tracer.scene, pattern, trace, params, mode, tracer)
     progress("reconstruct", 1.0)

@@ -9,10 +9,11 @@ render's own noise at the scene's spp, or half the scene's spp, where one
 more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
 full render, which is exact), a time limit leaves too little for OIDN on
-the whole image after one pass (known from an earlier time-limited render
-of the scene in the process, or measured by the first; then a *preview*: mode ``fast``
-at one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for a
-threshold asked for, a
+the whole image after one pass (judged before any pass: from the first
+round of an earlier time-limited render of the scene in the process, else
+from the preview's own grid, traced first; then a *preview*: mode ``fast``
+at one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for
+a threshold asked for, a
 round (the third on) predicts that meeting it in passes costs more than a
 full render:
 then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the
@@ -31,9 +32,10 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
-from ..recon.denoise import denoise_seconds, oidn_available, preset
+from ..recon.denoise import expected_seconds, oidn_available, preset
 from ..recon.sampling import SamplePattern
-from ..types import MRTParams, SeedStream
+from ..runtime.jit import kernel_seconds
+from ..types import MRTParams, SeedStream, SparseTrace
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
 from .replay import recordings
@@ -80,12 +82,14 @@ _first_round_s: dict = {}
 
 @dataclass
 class AutoOutcome:
-    """``auto``'s plan, and the image when the passes made it."""
+    """``auto``'s plan, and the image when the passes made it (``grid``: the
+    preview's grid, where tracing it told the plan)."""
 
     plan: Plan
     image: np.ndarray | None = None
     alpha: np.ndarray | None = None
     progress: Progress | None = None
+    grid: SparseTrace | None = None
 
 
 def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
@@ -131,23 +135,35 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
+    grid, surfaces, probed = None, None, False
+    if limit is not None and denoise:
+        first_s = _first_round_s.get(key)
+        if first_s is None:  # the preview's own grid says what a pass would cost
+            grid, pass_s = _grid_probe(pattern, tracer)
+            # the passes' textured pixels first, so that their time is not overlooked
+            surfaces, probed = _surfaces(scene, tracer, width, height), True
+            first_end = time.perf_counter() + pass_s
+        else:
+            first_end = started + first_s
+        if _preview_due(started + PREVIEW_SLACK * limit, first_end, width * height,
+                        params.denoise_quality):
+            return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes),
+                               grid=grid)
+    if denoise and not probed:
+        surfaces = _surfaces(scene, tracer, width, height)
     recorded = recordings()
-    first_s = _first_round_s.get(key) if limit is not None else None
-    if first_s is not None and _preview_due(started + PREVIEW_SLACK * limit - first_s,
-                                            width * height, params.denoise_quality, denoise):
-        return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes))
     costs = {}
 
     def stop_early(progress: Progress, pass_s: float):
         """Whether passes are the wrong plan for the target: the reason, or None."""
-        if deadline is not None:  # (later rounds leave OIDN its time)
-            if progress.spp > FIRST_ROUND:
-                return None
-            if recordings() == recorded and not progress.history:
+        if deadline is not None:
+            # the first round, once traced, is denoised however late it ends: OIDN on
+            # it costs less than a preview would (its time tells the next render's plan)
+            if (progress.spp <= FIRST_ROUND and recordings() == recorded
+                    and not progress.history):
                 # one pass, no estimate, and no recording (whose cost would not come again)
                 _first_round_s[key] = time.perf_counter() - started
-            return _preview_due(started + PREVIEW_SLACK * limit, width * height,
-                                params.denoise_quality, denoise)
+            return None
         if not denoise:
             return None
         target = params.noise_threshold or progress.full_error
@@ -175,7 +191,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=max_spp, full_spp=spp, area=area,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round,
-        surfaces=_surfaces(scene, tracer, width, height) if denoise else None)
+        surfaces=surfaces)
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
@@ -188,10 +204,6 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
                     passes=list(progress.history))
         return AutoOutcome(plan, image, alpha, progress)
-    if progress.stopped == PREVIEW_REASON:
-        return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes,
-                                pilot_s=progress.trace_s + progress.estimate_s,
-                                passes=list(progress.history)))
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
 
 
@@ -207,12 +219,26 @@ def _surfaces(scene, tracer, width: int, height: int) -> tuple | None:
     return ids.shape_index, textured
 
 
-def _preview_due(end: float, pixels: int, quality: str, denoise: bool) -> str | None:
-    """:data:`PREVIEW_REASON` where OIDN on ``pixels`` (its cost known from
-    an earlier call) would end after ``end`` (a ``time.perf_counter()``
-    value), else None."""
-    seconds = denoise_seconds(pixels, preset(quality)) if denoise else None
-    if seconds is not None and time.perf_counter() + seconds > end:
+def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:
+    """The preview's grid trace (:data:`PREVIEW`'s spp), and the seconds a
+    pass over every pixel is expected to take: the trace's kernels' run
+    time scaled to every pixel (a pass takes 0.7-0.9 of that), plus what
+    the trace took beyond its kernels (launching them, reading them back,
+    and in a fresh process the first use of the scene and the kernels)."""
+    begin = time.perf_counter()
+    with kernel_seconds() as spent:
+        grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
+                                                replay=True)
+    wall = time.perf_counter() - begin
+    pixels = pattern.width * pattern.height
+    return grid, max(wall - spent.execute, 0.0) + spent.execute * pixels / pattern.count
+
+
+def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> str | None:
+    """:data:`PREVIEW_REASON` where OIDN on ``pixels`` after a first round
+    ending at ``first_end`` would end after ``end`` (both
+    ``time.perf_counter()`` values), else None."""
+    if first_end + expected_seconds(pixels, preset(quality)) > end:
         return PREVIEW_REASON
     return None
 

@@ -37,7 +37,7 @@ from ..modes.plan import Candidate
 from ..recon.denoise import denoise_image, oidn_available, preset
 from ..recon.metrics import relative_error
 from ..recon.sampling import SamplePattern
-from ..runtime.jit import compile_seconds
+from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
 from .pipeline import mrt_image
 from .pixel_filter import filter_table
@@ -103,9 +103,9 @@ def effective_area(rfilter) -> float:
 
 def _timed(trace_fn, *args, **kwargs) -> tuple[SparseTrace, float]:
     """(trace, seconds of it that compiled kernels)."""
-    with compile_seconds() as spent:
+    with kernel_seconds() as spent:
         out = trace_fn(*args, **kwargs)
-    return out, spent[0]
+    return out, spent.compile
 
 
 def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,

@@ -20,8 +20,9 @@ error of the image denoised from ``k / 2`` passes, and the last two rounds
 say how fast it falls (:func:`predict`); a round that ends the passes at
 their cap is not estimated, only predicted.  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
-Under a time limit alone, once an earlier call in the process has said what
-OIDN costs, no error is estimated: the passes only fill the time.
+Under a time limit alone no error is estimated: the passes only fill the
+time, less what the last OIDN call is expected to take
+(:func:`~mitsuba_mrt.recon.denoise.expected_seconds`).
 """
 
 from __future__ import annotations
@@ -32,8 +33,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading, preset,
-                             textured_pixels)
+from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading,
+                             expected_seconds, preset, textured_pixels)
 from ..recon.metrics import relative_error
 from ..types import SeedStream
 from .scene_query import sampler_bakes_spp
@@ -412,14 +413,13 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     if target_error is None and deadline is None:  # the default target
         round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
                          max_spp)
-    # A time limit alone needs no estimates once OIDN's cost is known (from an
-    # earlier call in this process): the passes fill the time, from 1 spp on,
-    # in one half.
+    # A time limit alone needs no estimates: the passes fill the time, from 1
+    # spp on, in one half, and leave the last OIDN call its expected time
     final, quality = quality, preset(quality)  # (the estimates' preset)
-    known = denoise_seconds(n, quality) if denoise else 0.0
-    estimates = not (deadline is not None and target_error is None and known is not None)
+    estimates = not (deadline is not None and target_error is None)
     if not estimates:
-        round_size, oidn_px = 1, known / n
+        round_size = 1
+        oidn_px = expected_seconds(n, quality) / n if denoise else 0.0
     passes.guide_spp = max(GUIDE_PASSES, round_size)
     # a round is one launch, its halves its odd and even samples: a single
     # launch keeps a stratifying sampler's strata whole (two launches of half

@@ -7,12 +7,14 @@ so :func:`llvm_usable` asks Dr.Jit which libLLVM it loaded first.
 Dr.Jit's thread pool is left as the host set it: its idle workers do not
 slow the reconstruction's numpy code measurably (docs/BENCHMARKS.md), and
 resizing the pool around every reconstruction once hung a process.
-:func:`counting_kernels` and :func:`compile_seconds` watch what Dr.Jit compiles.
+:func:`counting_kernels` and :func:`kernel_seconds` watch what Dr.Jit compiles
+and runs.
 """
 
 from __future__ import annotations
 
 import contextlib
+from dataclasses import dataclass
 
 #: Oldest libLLVM major version the LLVM backend runs with.
 MIN_LLVM = 17
@@ -71,27 +73,40 @@ def counting_kernels():
         counts[:] = [after[2] - before[2], after[1] - before[1]]
 
 
+@dataclass
+class KernelSeconds:
+    """Seconds Dr.Jit spent on the kernels of a block: compiling those not
+    found in its caches, and executing all of them."""
+
+    compile: float = 0.0
+    execute: float = 0.0
+
+
 @contextlib.contextmanager
-def compile_seconds():
-    """Yield a one-element list that holds, after the block, the seconds Dr.Jit
-    spent compiling kernels inside it (kernels found in its caches cost none).
+def kernel_seconds():
+    """Yield a :class:`KernelSeconds` that holds, after the block, what
+    Dr.Jit spent on the block's kernels (from its kernel history, which is
+    switched on inside the block and read, so cleared, at both ends: blocks
+    do not nest).
 
     Examples
     --------
-    >>> with compile_seconds() as spent:
+    >>> with kernel_seconds() as spent:
     ...     pass
     >>> spent
-    [0.0]
+    KernelSeconds(compile=0.0, execute=0.0)
     """
     import drjit as dr
 
-    spent = [0.0]
+    spent = KernelSeconds()
     before = dr.flag(dr.JitFlag.KernelHistory)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()  # (reading the history clears it)
     try:
         yield spent
     finally:
-        spent[0] = sum(entry.get("codegen_time", 0.0) + entry.get("backend_time", 0.0)
-                       for entry in dr.kernel_history() if not entry.get("cache_hit")) / 1e3
+        history = dr.kernel_history()
+        spent.compile = sum(entry.get("codegen_time", 0.0) + entry.get("backend_time", 0.0)
+                            for entry in history if not entry.get("cache_hit")) / 1e3
+        spent.execute = sum(entry.get("execution_time", 0.0) for entry in history) / 1e3
         dr.set_flag(dr.JitFlag.KernelHistory, before)

@@ -197,31 +197,29 @@ def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
 
 
 def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
-    release()  # OIDN's cost unknown: the first round's estimate measures it
+    release()  # OIDN's cost unknown (its prior stands in), no pass traced yet
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
     assert plan.reason == auto.PREVIEW_REASON and plan.choice == auto.PREVIEW
     assert result.mode == "auto" and result.mode_used == "fast" and result.spp == 1
     assert result.params.denoise == "oidn" and result.timings.denoise > 0
-    assert plan.time_limit == 1e-6 and len(plan.passes) == 1
+    assert plan.time_limit == 1e-6 and plan.passes == []
     assert np.isfinite(result.image).all() and result.traced.grid > 0
-    # known now: one pass, no estimate, then the preview
-    again = mitsuba_mrt.render(scene, time_limit=1e-6)
-    assert again.auto.reason == auto.PREVIEW_REASON and again.auto.passes == []
+    # the grid that told the plan is the preview's own: the image is the mode's
+    direct = mitsuba_mrt.render(scene, mode="fast", spp=1, denoise="oidn")
+    assert np.array_equal(result.image, direct.image)
 
 
-def test_a_time_limit_below_a_round_ends_after_the_first(scene, monkeypatch):
+def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scene,
+                                                                            monkeypatch):
     # without the preview (which a limit this small gets) the first pass is denoised
     monkeypatch.setattr(auto, "_preview_due", lambda *args: None)
-    release()  # OIDN's cost unknown: the first round estimates the error, and it
+    release()  # OIDN's cost unknown: the last call is expected to take its prior
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
-    assert plan.reason == "denoised passes: the time limit" and result.spp == 2
-    assert plan.time_limit == 1e-6 and plan.target_error is None and len(plan.passes) == 1
-    # known now: a single pass fills the time, and nothing is estimated
-    again = mitsuba_mrt.render(scene, time_limit=1e-6)
-    assert again.spp == 1 and again.auto.passes == [] and again.auto.choice.error is None
-    assert again.timings.check == 0.0
+    assert plan.reason == "denoised passes: the time limit" and result.spp == 1
+    assert plan.time_limit == 1e-6 and plan.target_error is None and plan.passes == []
+    assert plan.choice.error is None and result.timings.check == 0.0
 
 
 def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
