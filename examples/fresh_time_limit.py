@@ -25,7 +25,8 @@ import mitsuba_mrt
 from mitsuba_mrt import runtime
 runtime.configure()
 mitsuba_mrt.activate("auto")
-scene = mitsuba_mrt.load_scene(sys.argv[1], res=256)
+defines = {"res": 256, **({"film_res": 384} if "crop_rgba" in sys.argv[1] else {})}
+scene = mitsuba_mrt.load_scene(sys.argv[1], **defines)  # (crop_rgba's film holds its crop)
 if sys.argv[2] == "full":
     print(json.dumps({"seconds": mitsuba_mrt.render_reference(scene)[1], "chose": "full"}))
 else:

@@ -135,21 +135,27 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
-    grid, surfaces, probed = None, None, False
+    grid, surfaces, found = None, None, False
     if limit is not None and denoise:
+        end = started + PREVIEW_SLACK * limit
         first_s = _first_round_s.get(key)
-        if first_s is None:  # the preview's own grid says what a pass would cost
+        preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
+        if first_s is not None:
+            if _preview_due(end, started + first_s, width * height, params.denoise_quality):
+                return AutoOutcome(preview)
+        else:  # the preview's own grid says what a pass would cost
             grid, pass_s = _grid_probe(pattern, tracer)
-            # the passes' textured pixels first, so that their time is not overlooked
-            surfaces, probed = _surfaces(scene, tracer, width, height), True
-            first_end = time.perf_counter() + pass_s
-        else:
-            first_end = started + first_s
-        if _preview_due(started + PREVIEW_SLACK * limit, first_end, width * height,
-                        params.denoise_quality):
-            return AutoOutcome(Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes),
-                               grid=grid)
-    if denoise and not probed:
+
+            def due() -> bool:
+                return bool(_preview_due(end, time.perf_counter() + pass_s, width * height,
+                                         params.denoise_quality))
+            if due():
+                return AutoOutcome(preview, grid=grid)
+            # the passes' textured pixels, then the same question with their time spent
+            surfaces, found = _surfaces(scene, tracer, width, height), True
+            if due():
+                return AutoOutcome(preview, grid=grid)
+    if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height)
     recorded = recordings()
     costs = {}
