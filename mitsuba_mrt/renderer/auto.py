@@ -73,6 +73,11 @@ PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the 
 #: is held to within 10 %.
 PREVIEW_SLACK = 1.1
 
+#: A pass of every pixel (1 spp, box filter, guides) over the preview's grid
+#: trace's kernel time scaled to as many pixels (that trace also follows
+#: each pixel's centre for its ids): 0.65-0.81 on the gallery at 256 px.
+PASS_OVER_GRID = 0.75
+
 #: Seconds from a time-limited render's start to the end of its first round
 #: of passes, per traced objects and pixel count, from the last such render
 #: in this process whose kernels were all replayed: what tells a limit too
@@ -228,16 +233,17 @@ def _surfaces(scene, tracer, width: int, height: int) -> tuple | None:
 def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:
     """The preview's grid trace (:data:`PREVIEW`'s spp), and the seconds a
     pass over every pixel is expected to take: the trace's kernels' run
-    time scaled to every pixel (a pass takes 0.7-0.9 of that), plus what
-    the trace took beyond its kernels (launching them, reading them back,
-    and in a fresh process the first use of the scene and the kernels)."""
+    time scaled to every pixel, times :data:`PASS_OVER_GRID`, plus what the
+    trace took beyond its kernels (launching them, reading them back, and
+    in a fresh process the first use of the scene and the kernels)."""
     begin = time.perf_counter()
     with kernel_seconds() as spent:
         grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
                                                 replay=True)
     wall = time.perf_counter() - begin
     pixels = pattern.width * pattern.height
-    return grid, max(wall - spent.execute, 0.0) + spent.execute * pixels / pattern.count
+    return grid, (max(wall - spent.execute, 0.0)
+                  + PASS_OVER_GRID * spent.execute * pixels / pattern.count)
 
 
 def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> str | None:
