@@ -1,12 +1,14 @@
 """``auto --time-limit`` as a user's first render: each render in a fresh process.
 
-    python examples/fresh_time_limit.py two_sensors cornell spot_textures
+    python examples/fresh_time_limit.py checker_border cornell crop_rgba envmap_objects \
+        instanced materials room spot_textures two_sensors
 
 Per gallery scene at 256 x 256: the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
 rendering once with ``time_limit``.  Printed: each render's seconds over its
-limit and the plan it chose.  Kernels come from Dr.Jit's disk cache; the
-process has no earlier render to learn OIDN's or a pass's cost from.
+limit and the plan it chose.  Kernels come from Dr.Jit's disk cache (run it
+twice after a change of the trace kernels: the first run fills the cache);
+the process has no earlier render to learn OIDN's or a pass's cost from.
 """
 
 import json

@@ -66,7 +66,8 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
 
 _lock = threading.Lock()
 # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter;
-# "seconds": quality -> {pixels: seconds of the last execution at that size}
+# "seconds": quality -> {pixels: seconds of the last call at that size, its
+# filter's set-up left out}; "setup_s": the last call's set-up
 _state: dict = {}
 
 
@@ -98,8 +99,8 @@ def release() -> None:
 
 
 def denoise_seconds(pixels: int, quality: str) -> float | None:
-    """The seconds :func:`denoise_image` is expected to take on ``pixels``
-    pixels at ``quality``, its filter's set-up left out (None before any call
+    """The seconds :func:`denoise_image` (or :func:`denoise_shading`) is
+    expected to take on ``pixels`` pixels at ``quality``, its filter's set-up left out (None before any call
     at ``quality`` in this process): the last call's on that many pixels;
     else a line through the last calls' times on the two largest images (a
     fixed cost and one per pixel), or the one image's time scaled to
@@ -118,11 +119,11 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
     return table[largest] * pixels / largest
 
 
-#: Seconds OIDN's RT filter takes per pixel and worker thread, with both
-#: guides, before any call in the process has measured it: a little above
-#: what it takes on a 2-core x86 CPU (256-512 px), so that a first
-#: time-limited render plans for a call no faster than it will be.
-PRIOR_SECONDS = {"fast": 1.2e-6, "balanced": 2.1e-6, "high": 2.1e-6}
+#: Seconds a call of :func:`denoise_image` takes per pixel and worker thread,
+#: with both guides, before any call in the process has measured it: a
+#: little above what it takes on a 2-core x86 CPU (256-512 px), so that a
+#: first time-limited render plans for a call no faster than it will be.
+PRIOR_SECONDS = {"fast": 1.3e-6, "balanced": 2.2e-6, "high": 2.2e-6}
 
 
 def expected_seconds(pixels: int, quality: str) -> float:
@@ -179,6 +180,7 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     ``clean_aux`` tells OIDN they are noise-free. Returns float64.
     ``quality`` is one of :data:`QUALITIES`.
     """
+    start = time.perf_counter()
     oidn = _oidn()
     if normal is not None and albedo is None:
         normal = None
@@ -196,18 +198,25 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
             try:
                 for name, image in images.items():
                     flt.set_image(name, image)
-                flt.commit()  # (a new filter's set-up, kept out of the time below)
                 begin = time.perf_counter()
+                flt.commit()  # (a new filter's set-up, kept out of the call's time)
+                setup = time.perf_counter() - begin
                 flt.execute()
-                _state.setdefault("seconds", {}).setdefault(quality, {})[
-                    output.shape[0] * output.shape[1]] = time.perf_counter() - begin
             finally:  # the filter holds raw pointers to these arrays: point it away from them
                 for name in images:
                     flt.unset_image(name)
         except oidn.Error as exc:
             raise MRTError(f"Open Image Denoise failed: "
                            f"{str(exc).strip().splitlines()[0]}") from None
-    return output.astype(np.float64)
+    output = output.astype(np.float64)
+    _state["setup_s"] = setup
+    _record(quality, output.shape[0] * output.shape[1], time.perf_counter() - start - setup)
+    return output
+
+
+def _record(quality: str, pixels: int, seconds: float) -> None:
+    """Note what a call on ``pixels`` at ``quality`` took (:func:`denoise_seconds`)."""
+    _state.setdefault("seconds", {}).setdefault(quality, {})[pixels] = seconds
 
 
 def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | None,
@@ -222,13 +231,18 @@ def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | 
     shading; OIDN keeps a texture it is shown as a guide only as well as its
     network can, and the division hands it the smooth part alone.
     """
+    start = time.perf_counter()
     textured = np.asarray(textured, dtype=bool)[..., None]
     texture = safe_albedo(albedo)
     surface = (np.asarray(albedo) > 0).any(axis=-1, keepdims=True) | textured
     flat = np.where(textured, surface, albedo).astype(np.float64)
+    pixels = textured.shape[0] * textured.shape[1]
     out = denoise_image(np.where(textured, np.asarray(color, dtype=np.float64) / texture, color),
                         flat, normal, quality)
-    return np.where(textured, out * texture, out)
+    out = np.where(textured, out * texture, out)
+    # what the whole call took, the division's work in, the filter's set-up out
+    _record(quality, pixels, time.perf_counter() - start - _state["setup_s"])
+    return out
 
 
 def textured_pixels(shape_index: np.ndarray, albedo: np.ndarray,
