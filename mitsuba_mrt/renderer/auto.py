@@ -104,9 +104,9 @@ def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
     The scalar variant traces pixel by pixel in Python while ``mi.render``
     runs Mitsuba's multithreaded C++ loop, so only a full render can win
     there; below ``AUTO_MIN_SAMPLES`` samples the passes' launches would cost
-    more than they could save.
+    more than they could save, unless a time limit asks for what fits it.
     """
-    if jit and width * height * spp >= AUTO_MIN_SAMPLES:
+    if jit and (width * height * spp >= AUTO_MIN_SAMPLES or params.time_limit is not None):
         return None
     reason = ("the scalar variant renders in full" if not jit
               else "too few samples for a plan to pay")

@@ -288,6 +288,13 @@ def test_small_jobs_render_in_full_without_a_pilot(variant):
     assert np.array_equal(result.image, reference)
 
 
+def test_small_jobs_under_a_time_limit_take_what_fits_it(variant):
+    scene = mi.load_string(scene_xml(32))
+    result = mitsuba_mrt.render(scene, time_limit=1e-6)
+    assert result.mode_used != "full" and "too few samples" not in result.auto.reason
+    assert result.spp == 1 and result.auto.time_limit == 1e-6
+
+
 def test_the_scalar_variant_renders_in_full(variant):
     try:
         mi.set_variant("scalar_rgb")
