@@ -67,7 +67,7 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
 _lock = threading.Lock()
 # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter;
 # "seconds": quality -> {pixels: seconds of the last call at that size, its
-# filter's set-up left out}; "setup_s": the last call's set-up
+# filter's set-up left out}
 _state: dict = {}
 
 
@@ -100,8 +100,9 @@ def release() -> None:
 
 def denoise_seconds(pixels: int, quality: str) -> float | None:
     """The seconds :func:`denoise_image` (or :func:`denoise_shading`) is
-    expected to take on ``pixels`` pixels at ``quality``, its filter's set-up left out (None before any call
-    at ``quality`` in this process): the last call's on that many pixels;
+    expected to take on ``pixels`` pixels at ``quality``, its filter's
+    set-up left out (None before any call at ``quality`` in this process):
+    the last call's on that many pixels;
     else a line through the last calls' times on the two largest images (a
     fixed cost and one per pixel), or the one image's time scaled to
     ``pixels``."""
@@ -181,6 +182,14 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     ``quality`` is one of :data:`QUALITIES`.
     """
     start = time.perf_counter()
+    output, setup = _run_filter(color, albedo, normal, quality, clean_aux)
+    _record(quality, output.shape[:2], time.perf_counter() - start - setup)
+    return output
+
+
+def _run_filter(color, albedo, normal, quality: str, clean_aux: bool) -> tuple[np.ndarray, float]:
+    """:func:`denoise_image`'s work: (the float64 output, the seconds of its
+    filter's set-up)."""
     oidn = _oidn()
     if normal is not None and albedo is None:
         normal = None
@@ -199,7 +208,7 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
                 for name, image in images.items():
                     flt.set_image(name, image)
                 begin = time.perf_counter()
-                flt.commit()  # (a new filter's set-up, kept out of the call's time)
+                flt.commit()  # (a new filter's set-up: not part of a call's expected time)
                 setup = time.perf_counter() - begin
                 flt.execute()
             finally:  # the filter holds raw pointers to these arrays: point it away from them
@@ -208,15 +217,13 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
         except oidn.Error as exc:
             raise MRTError(f"Open Image Denoise failed: "
                            f"{str(exc).strip().splitlines()[0]}") from None
-    output = output.astype(np.float64)
-    _state["setup_s"] = setup
-    _record(quality, output.shape[0] * output.shape[1], time.perf_counter() - start - setup)
-    return output
+    return output.astype(np.float64), setup
 
 
-def _record(quality: str, pixels: int, seconds: float) -> None:
-    """Note what a call on ``pixels`` at ``quality`` took (:func:`denoise_seconds`)."""
-    _state.setdefault("seconds", {}).setdefault(quality, {})[pixels] = seconds
+def _record(quality: str, shape: tuple, seconds: float) -> None:
+    """Note what a call on an image of ``shape`` at ``quality`` took
+    (:func:`denoise_seconds`)."""
+    _state.setdefault("seconds", {}).setdefault(quality, {})[shape[0] * shape[1]] = seconds
 
 
 def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | None,
@@ -236,12 +243,10 @@ def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | 
     texture = safe_albedo(albedo)
     surface = (np.asarray(albedo) > 0).any(axis=-1, keepdims=True) | textured
     flat = np.where(textured, surface, albedo).astype(np.float64)
-    pixels = textured.shape[0] * textured.shape[1]
-    out = denoise_image(np.where(textured, np.asarray(color, dtype=np.float64) / texture, color),
-                        flat, normal, quality)
+    out, setup = _run_filter(np.where(textured, np.asarray(color, dtype=np.float64) / texture,
+                                      color), flat, normal, quality, False)
     out = np.where(textured, out * texture, out)
-    # what the whole call took, the division's work in, the filter's set-up out
-    _record(quality, pixels, time.perf_counter() - start - _state["setup_s"])
+    _record(quality, out.shape[:2], time.perf_counter() - start - setup)  # (the division in)
     return out
 
 

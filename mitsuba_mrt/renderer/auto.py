@@ -152,8 +152,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             grid, pass_s = _grid_probe(pattern, tracer)
 
             def due() -> bool:
-                return bool(_preview_due(end, time.perf_counter() + pass_s, width * height,
-                                         params.denoise_quality))
+                return _preview_due(end, time.perf_counter() + pass_s, width * height,
+                                    params.denoise_quality)
             if due():
                 return AutoOutcome(preview, grid=grid)
             # the passes' textured pixels, then the same question with their time spent
@@ -246,13 +246,11 @@ def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:
                   + PASS_OVER_GRID * spent.execute * pixels / pattern.count)
 
 
-def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> str | None:
-    """:data:`PREVIEW_REASON` where OIDN on ``pixels`` after a first round
-    ending at ``first_end`` would end after ``end`` (both
-    ``time.perf_counter()`` values), else None."""
-    if first_end + expected_seconds(pixels, preset(quality)) > end:
-        return PREVIEW_REASON
-    return None
+def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> bool:
+    """Whether OIDN on ``pixels`` after a first round ending at
+    ``first_end`` would end after ``end`` (both ``time.perf_counter()``
+    values)."""
+    return first_end + expected_seconds(pixels, preset(quality)) > end
 
 
 def noise_free(tracer, width: int, height: int) -> bool:

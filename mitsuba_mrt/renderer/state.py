@@ -5,9 +5,9 @@ made: the trace's recorded kernels and the Mitsuba objects held for them,
 a filter or integrator made once per variant, the tables of the pixel
 filters, the OIDN device and filters, interpolation weights, and what the
 last renders took (OIDN's calls, ``auto``'s first round under a time
-limit).  None of them changes a result, but for ``auto`` under a time
-limit, which reads those times.  :func:`clear_caches` drops them all, to free what they
-hold or to time a first call again; docs/ARCHITECTURE.md (Process-wide
+limit).  None of them changes a result, except that ``auto`` plans a
+time limit from those times.  :func:`clear_caches` drops them all, to free
+what they hold or to time a first call again; docs/ARCHITECTURE.md (Process-wide
 state) lists each, with the state that is not a cache and stays.
 """
 

@@ -213,7 +213,7 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
 def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scene,
                                                                             monkeypatch):
     # without the preview (which a limit this small gets) the first pass is denoised
-    monkeypatch.setattr(auto, "_preview_due", lambda *args: None)
+    monkeypatch.setattr(auto, "_preview_due", lambda *args: False)
     release()  # OIDN's cost unknown: the last call is expected to take its prior
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
