@@ -97,35 +97,51 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
     ``bounces`` (0 in a scene without delta lobes), and the albedo is that of the surface seen
     times the specular throughput; 0 on a miss.  The mean over a pixel's
     samples estimates the pixel's albedo the way its radiance is estimated.
+    The bounces after the first are one symbolic loop (:func:`drjit.while_loop`):
+    traced once, and a wavefront's lanes leave it at their first rough surface.
     """
-    albedo = mi.Color3f(0.0)
-    throughput = mi.Color3f(1.0)
-    ray = mi.Ray3f(ray)
-    active = mi.Bool(active) if is_jit() else bool(active)
-    hit, normal = None, None
-    for depth in range(bounces + 1):
-        si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=depth == 0,
-                                 active=active)
-        valid = active & si.is_valid() if is_jit() else bool(active and si.is_valid())
-        if depth == 0:
-            hit = valid
-            normal = dr.select(valid, si.sh_frame.n, 0.0) if is_jit() else (
-                si.sh_frame.n if valid else mi.Vector3f(0.0))
-        if not (is_jit() or valid):
-            break
-        bsdf = si.bsdf(ray)
-        bs, weight = bsdf.sample(mi.BSDFContext(), si, sampler.next_1d(valid),
-                                 sampler.next_2d(valid), valid)
-        weight = dr.clip(_rgb(weight, si.wavelengths, valid), 0.0, 1.0)
-        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-        done = valid & (bs.pdf > 0.0) & (logical_not(delta) if depth < bounces else True)
-        albedo = dr.select(done, throughput * weight, albedo)
-        if not is_jit() and done:
-            break
-        active = valid & (bs.pdf > 0.0) & logical_not(done)
-        throughput = throughput * weight
-        ray = si.spawn_ray(si.to_world(bs.wo))
+    jit = is_jit()
+    ray = mi.Ray3f(ray)  # (no differentials: the BSDF's textures need none here)
+    si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=True,
+                             active=mi.Bool(active) if jit else bool(active))
+    hit = (mi.Bool(active) & si.is_valid()) if jit else bool(active and si.is_valid())
+    normal = dr.select(hit, si.sh_frame.n, 0.0) if jit else (
+        si.sh_frame.n if hit else mi.Vector3f(0.0))
+    albedo, throughput, ray, active = _scatter(si, ray, hit, sampler, mi.Color3f(1.0),
+                                               mi.Color3f(0.0), bounces == 0)
+
+    def more(depth, ray, throughput, albedo, active, sampler):
+        return active
+
+    def bounce(depth, ray, throughput, albedo, active, sampler):
+        si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
+        valid = active & si.is_valid() if jit else bool(active and si.is_valid())
+        albedo, throughput, ray, active = _scatter(si, ray, valid, sampler, throughput, albedo,
+                                                   depth == bounces)
+        return depth + 1, ray, throughput, albedo, active, sampler
+
+    if bounces > 0:
+        albedo = dr.while_loop((mi.UInt32(1) if jit else 1, ray, throughput, albedo, active,
+                                sampler), more, bounce, label="mrt_albedo_along")[3]
     return albedo, hit, normal
+
+
+def _scatter(si, ray, valid, sampler, throughput, albedo, last):
+    """One BSDF sample at ``si`` (lanes ``valid``): (the albedo, set where the
+    path ends here: a non-delta lobe, or a delta one at the ``last`` bounce;
+    the throughput times the sample's weight; the next ray; whether the path
+    goes on)."""
+    if not (is_jit() or valid):
+        return albedo, throughput, ray, False
+    bsdf = si.bsdf(ray)
+    bs, weight = bsdf.sample(mi.BSDFContext(), si, sampler.next_1d(valid),
+                             sampler.next_2d(valid), valid)
+    weight = dr.clip(_rgb(weight, si.wavelengths, valid), 0.0, 1.0)
+    delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+    done = valid & (bs.pdf > 0.0) & (logical_not(delta) | last)
+    albedo = dr.select(done, throughput * weight, albedo)
+    return (albedo, throughput * weight, si.spawn_ray(si.to_world(bs.wo)),
+            valid & (bs.pdf > 0.0) & logical_not(done))
 
 
 def _read_sums(sums, radiance: bool = True) -> _Developed:
