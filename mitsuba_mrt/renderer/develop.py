@@ -101,10 +101,8 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
     traced once, and a wavefront's lanes leave it at their first rough surface.
     """
     jit = is_jit()
-    ray = mi.Ray3f(ray)  # (no differentials: the BSDF's textures need none here)
-    si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=True,
-                             active=mi.Bool(active) if jit else bool(active))
-    hit = (mi.Bool(active) & si.is_valid()) if jit else bool(active and si.is_valid())
+    ray = mi.Ray3f(ray)
+    si, hit = _intersect(scene, ray, mi.Bool(active) if jit else bool(active), coherent=True)
     normal = dr.select(hit, si.sh_frame.n, 0.0) if jit else (
         si.sh_frame.n if hit else mi.Vector3f(0.0))
     albedo, throughput, ray, active = _scatter(si, ray, hit, sampler, mi.Color3f(1.0),
@@ -114,8 +112,7 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
         return active
 
     def bounce(depth, ray, throughput, albedo, active, sampler):
-        si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=False, active=active)
-        valid = active & si.is_valid() if jit else bool(active and si.is_valid())
+        si, valid = _intersect(scene, ray, active, coherent=False)
         albedo, throughput, ray, active = _scatter(si, ray, valid, sampler, throughput, albedo,
                                                    depth == bounces)
         return depth + 1, ray, throughput, albedo, active, sampler
@@ -124,6 +121,12 @@ def _albedo_along(scene, sampler, ray, active, bounces: int = MIRROR_DEPTH):
         albedo = dr.while_loop((mi.UInt32(1) if jit else 1, ray, throughput, albedo, active,
                                 sampler), more, bounce, label="mrt_albedo_along")[3]
     return albedo, hit, normal
+
+
+def _intersect(scene, ray, active, coherent: bool):
+    """(the hit of ``ray`` for lanes ``active``, whether it is a surface)."""
+    si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.All, coherent=coherent, active=active)
+    return si, (active & si.is_valid() if is_jit() else bool(active and si.is_valid()))
 
 
 def _scatter(si, ray, valid, sampler, throughput, albedo, last):
