@@ -11,6 +11,8 @@ those single-sample albedos) again with :data:`ALBEDO_SAMPLES`, the count of
 a one-step pass, through the film's filter.  The first step develops its
 samples with a box filter (each in its own pixel): where the albedo is one,
 a filter changes nothing, and where it is not, the second step replaces it.
+Through a box filter the second step sums each pixel's own samples; through
+a wider one it splats them over an image-sized block, as ``mi.render`` does.
 """
 
 from __future__ import annotations
@@ -62,14 +64,9 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
     reach = _reach(None if box else sensor.film().rfilter())
     again = varied_pixels(pixel_xy, width, height, first.albedo, surface, reach)
     if again.any():
-        # splatted as in a one-step pass, from every pixel whose samples reach them
-        mask = np.zeros((height, width), dtype=bool)
-        mask[pixel_xy[again, 1], pixel_xy[again, 0]] = True
-        sources = np.argwhere(ndimage.maximum_filter(mask, size=2 * reach + 1,
-                                                     mode="constant"))[:, ::-1]
         sampler.set_sample_count(count)
-        second = _splatted(develop, scene, sensor, sampler, pixel_xy[again], sources, count,
-                           (seed + SECOND_SEED) & 0xFFFFFFFF, replay, box)
+        second = _second_step(develop, scene, sensor, sampler, pixel_xy[again], reach, count,
+                              (seed + SECOND_SEED) & 0xFFFFFFFF, replay, box)
         first.albedo[again] = second.albedo
         first.normal[again] = second.normal
     return first
@@ -123,19 +120,43 @@ def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndar
     return marked[y, x]
 
 
-#: Where the padding of a set of source pixels is traced: far enough outside
-#: the image that no filter splats a sample of it into a pixel.
+#: Where the padding of a set of pixels is traced: far enough outside the
+#: image that no filter splats a sample of it into a pixel.
 OUTSIDE = -64
 
 
-def _splatted(develop, scene, sensor, sampler, pixel_xy, sources, count, seed, replay,
-              box) -> _Developed:
-    """``develop`` of ``pixel_xy`` from the samples of ``sources`` (a set whose
-    size changes from render to render): with ``replay``, ``sources`` padded
-    to :func:`~.replay.padded_size` with pixels outside the image, and replayed."""
-    replay = replay and replay_active()
-    if replay:
-        pad = np.full((padded_size(len(sources)) - len(sources), 2), OUTSIDE, dtype=np.int64)
-        sources = np.concatenate([sources, pad])
+def _second_step(develop, scene, sensor, sampler, pixel_xy, reach, count, seed, replay,
+                 box) -> _Developed:
+    """``develop`` of ``pixel_xy`` (a set whose size changes from render to
+    render) at ``count`` spp, as a one-step pass develops them.
+
+    Where no sample leaves its pixel (``reach`` 0: a box filter) each pixel
+    is its own samples' sum, as a sparse trace's; else the pixels are
+    splatted, as ``mi.render`` does, from every pixel whose samples reach
+    them, through an image-sized block.  With ``replay`` the traced set is
+    padded to :func:`~.replay.padded_size` with pixels outside the image,
+    and replayed.
+    """
+    sources = None
+    if reach > 0:  # every pixel whose samples reach them
+        width, height = (int(v) for v in sensor.film().crop_size())
+        mask = np.zeros((height, width), dtype=bool)
+        mask[pixel_xy[:, 1], pixel_xy[:, 0]] = True
+        sources = np.argwhere(ndimage.maximum_filter(mask, size=2 * reach + 1,
+                                                     mode="constant"))[:, ::-1]
+    traced = pixel_xy if sources is None else sources
+    if replay and replay_active():
+        pad = np.full((padded_size(len(traced)) - len(traced), 2), OUTSIDE, dtype=np.int64)
+        traced = np.concatenate([traced, pad])
+    if sources is None:
+        return _first_rows(develop(scene, sensor, None, sampler, traced, count, seed, True,
+                                   replay, box), len(pixel_xy))
     return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box,
-                   sources)
+                   traced)
+
+
+def _first_rows(developed: _Developed, n: int) -> _Developed:
+    """``developed`` of its first ``n`` pixels (the padding dropped)."""
+    return _Developed(*(None if v is None else v[:n] for v in (
+        developed.radiance, developed.alpha, developed.variance, developed.albedo,
+        developed.normal, developed.odd)))

@@ -69,3 +69,20 @@ def test_only_pixels_near_a_change_take_the_second_step(variant, monkeypatch):
     flat = trace.albedo[~again & (trace.shape_index > 0)]
     colours = {0.1, 0.9, 0.5, 0.8, 0.2}  # checker squares, floor, the sphere's channels
     assert len(flat) and np.isin(np.round(flat, 5), list(colours)).all()
+
+
+def test_through_a_box_filter_the_second_step_is_the_splatted_one_without_a_block(variant):
+    # no sample leaves its pixel: each pixel's own sums give what the image
+    # block's splat gives (same samples; float32 sums added in another order)
+    scene = _scene('<rfilter type="box"/>')
+    sensor = scene.sensors()[0]
+    sampler = sensor.sampler().clone()
+    sampler.set_sample_count(16)
+    develop = _develop_jit if is_jit() else _develop_scalar
+    xy = _every()[::7]
+    own = ap._second_step(develop, scene, sensor, sampler, xy, 0, 16, 5, False, False)
+    splat = develop(scene, sensor, None, sampler, xy, 16, 5, True, False, False, xy)
+    assert own.albedo.shape == (len(xy), 3)
+    np.testing.assert_allclose(own.albedo, splat.albedo, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(own.normal, splat.normal, rtol=1e-5, atol=1e-6)
+    assert 0.05 < own.albedo.mean() < 0.95
