@@ -44,7 +44,6 @@ FIT_TOLERANCE = 0.15
 #: A pixel whose albedo gives its own region this share or more is left alone.
 MAX_SHARE = 0.98
 
-_PAD = 3  # the farthest pixel read, in steps from the edge pixel
 _NEAR = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
 _DIRECTIONS = [(0, 1), (0, -1), (1, 0), (-1, 0)]
 
@@ -86,31 +85,37 @@ def unmix_edges(irradiance: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
     ys, xs = np.nonzero(edge_mask(ids) & ~keep)
     if not len(ys):
         return image, unmixed
-    width = ids.shape[1] + 2 * _PAD  # of the padded images, indexed flat
-    at = (ys + _PAD) * width + xs + _PAD
-    ids_at = np.pad(ids, _PAD, constant_values=-1).ravel()
-    own = ids_at[at]
+    height, width = ids.shape
 
-    near = np.stack([ids_at[at + dy * width + dx] for dy, dx in _NEAR], axis=1)
+    def id_at(dy, dx):  # the ids dy, dx steps from each edge pixel (-1 off the image)
+        y, x = ys + dy, xs + dx
+        inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
+        return np.where(inside, ids[np.clip(y, 0, height - 1), np.clip(x, 0, width - 1)], -1)
+
+    own = ids[ys, xs]
+    near = np.stack([id_at(dy, dx) for dy, dx in _NEAR], axis=1)
     foreign = (near != own[:, None]) & (near >= 0)
     other = np.where(foreign, near, np.iinfo(near.dtype).max).min(axis=1)
     single = foreign.any(axis=1) & (np.where(foreign, near, other[:, None])
                                     == other[:, None]).all(axis=1)
-    step = np.zeros(len(at), dtype=np.int64)  # 0: no direction reads across
+    sy, sx = np.zeros(len(ys), dtype=np.int64), np.zeros(len(ys), dtype=np.int64)
+    found = np.zeros(len(ys), dtype=bool)  # a direction that reads across
     for dy, dx in _DIRECTIONS:
-        k = dy * width + dx
-        across = (single & (step == 0) & (ids_at[at - 2 * k] == own) & (ids_at[at - k] == own)
-                  & (ids_at[at + k] == other) & (ids_at[at + 2 * k] == other)
-                  & (ids_at[at + 3 * k] == other))
-        step[across] = k
-    index = np.flatnonzero(step)
-    at, step = at[index], step[index]
+        across = (single & ~found & (id_at(-2 * dy, -2 * dx) == own)
+                  & (id_at(-dy, -dx) == own) & (id_at(dy, dx) == other)
+                  & (id_at(2 * dy, 2 * dx) == other) & (id_at(3 * dy, 3 * dx) == other))
+        sy[across], sx[across] = dy, dx
+        found |= across
+    index = np.flatnonzero(found)
+    ys, xs, sy, sx = ys[index], xs[index], sy[index], sx[index]
 
-    colours = np.pad(albedo, ((_PAD, _PAD), (_PAD, _PAD), (0, 0))).reshape(-1, 3)
-    mine = colours[at - step], colours[at - 2 * step]
-    theirs = colours[at + 2 * step], colours[at + 3 * step]
+    def colour(m):  # the albedo m steps across the edge (on the image: the ids above say so)
+        return albedo[ys + m * sy, xs + m * sx]
+
+    mine = colour(-1), colour(-2)
+    theirs = colour(2), colour(3)
     a1, a2 = (mine[0] + mine[1]) / 2, (theirs[0] + theirs[1]) / 2
-    pixel = colours[at]
+    pixel = colour(0)
     d = a1 - a2
     squared = np.einsum("nc,nc->n", d, d)
     distance = np.sqrt(squared)
@@ -125,10 +130,9 @@ def unmix_edges(irradiance: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
             & (off_line <= FIT_TOLERANCE * distance) & (spread <= FIT_TOLERANCE * distance))
     if not good.any():
         return image, unmixed
-    index, at, step = index[good], at[good], step[good]
+    y, x, sy, sx = ys[good], xs[good], sy[good], sx[good]
     share, a1, a2 = share[good][:, None], a1[good], a2[good]
-    e2 = np.pad(irradiance, ((_PAD, _PAD), (_PAD, _PAD), (0, 0))).reshape(-1, 3)[at + step]
-    y, x = ys[index], xs[index]
+    e2 = irradiance[y + sy, x + sx]
     image[y, x] = share * a1 * irradiance[y, x] + (1 - share) * a2 * e2
     unmixed[y, x] = True
     return image, unmixed
