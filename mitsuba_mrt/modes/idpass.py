@@ -42,13 +42,17 @@ def unsupported_pixels(pattern: SamplePattern, grid_ids: np.ndarray,
     nr, nc = grid_ids.shape
     cy, _ = cell_coordinates(pattern.rows, pattern.height)
     cx, _ = cell_coordinates(pattern.cols, pattern.width)
-    found = np.zeros(id_map.shape, dtype=bool)
-    for dy in (-1, 0, 1, 2):
-        gy = np.clip(cy + dy, 0, nr - 1)
+    # the block's own corner sample first, over the image: it carries most pixels' ids
+    missing = grid_ids[cy[:, None], cx[None, :]] != id_map
+    y, x = np.nonzero(missing)
+    ids, found = id_map[y, x], np.zeros(len(y), dtype=bool)
+    for dy in (-1, 0, 1, 2):  # the other 15, for the pixels left
+        gy = np.clip(cy[y] + dy, 0, nr - 1)
         for dx in (-1, 0, 1, 2):
-            gx = np.clip(cx + dx, 0, nc - 1)
-            found |= grid_ids[gy[:, None], gx[None, :]] == id_map
-    return ~found
+            if dy or dx:
+                found |= grid_ids[gy, np.clip(cx[x] + dx, 0, nc - 1)] == ids
+    missing[y, x] = ~found
+    return missing
 
 
 def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
