@@ -388,11 +388,11 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool) -> _De
         at[0] += k
         return np.array(values[:, first:first + k], dtype=np.float64)
 
-    zeros = np.zeros((n, 3))
+    # (zeros of their own, not copies: untraced fields cost no memory until written)
     rgb, alpha, second = (take(3), take(1).reshape(n), take(3)) if radiance else (
-        zeros, np.zeros(n), None)
-    variance = zeros.copy() if second is None else _variance(second, rgb)
-    guide = (take(3), take(3)) if albedo else (zeros.copy(), zeros.copy())
+        np.zeros((n, 3)), np.zeros(n), None)
+    variance = np.zeros((n, 3)) if second is None else _variance(second, rgb)
+    guide = (take(3), take(3)) if albedo else (np.zeros((n, 3)), np.zeros((n, 3)))
     odd = take(3) if halves else None
     return _Developed(rgb, alpha, variance, *guide, odd)
 

@@ -30,8 +30,10 @@ def _to_numpy(value, width: int) -> np.ndarray:
     """
     if is_jit() and dr.depth_v(value) > 1:
         dr.eval(value)
-        return np.stack([np.broadcast_to(np.asarray(c, dtype=np.float64), (width,))
-                         for c in value], axis=1)
+        out = np.empty((width, len(value)))
+        for j, c in enumerate(value):  # each component straight into its column
+            out[:, j] = np.asarray(c)
+        return out
     arr = np.asarray(value)
     if arr.ndim == 2:
         return np.broadcast_to(arr.T, (width, arr.shape[0])).astype(np.float64)
