@@ -10,9 +10,10 @@ ends up with its traced id (up to features thinner than the sub-cells).
 Cells with a corner on a curved mirror are split down to pixels whatever
 their ids: such a mirror minifies what it reflects, so its reflected
 regions are often thinner than the cells and invisible to their corners.
-Values then come from :func:`mitsuba_mrt.recon.within_region.interpolate_traced_grid` with
+Values then come from :class:`mitsuba_mrt.recon.within_region.TracedGridValues` with
 the refined ids (demodulated by albedo where it varies, as in ``fast``), and
-every traced pixel keeps its traced radiance.
+every traced pixel keeps its traced radiance; the half of that interpolation
+that needs no ids runs beside the edges' tracing.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..recon.sampling import SamplePattern
-from ..recon.within_region import interpolate_traced_grid
+from ..recon.within_region import TracedGridValues
 from ..types import (MRTParams, Reconstruction, SeedStream, SparseTrace, Timings, Tracer,
                      check_radiance)
 from .fast import skips_from
@@ -240,6 +241,8 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     stats = Counter()
     start = time.perf_counter()
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
+    # the interpolation's half that needs no final ids, beside the edges' tracing
+    values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, grid_ids.ravel())
     extra = []
 
     curved = trace.curved_mirror
@@ -275,8 +278,7 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     edges_s = time.perf_counter() - start - trace_s
 
     start = time.perf_counter()
-    image, counts = interpolate_traced_grid(pattern, trace.radiance, trace.albedo,
-                                            grid_ids.ravel(), id_map)
+    image, counts = values.finish(id_map)
     stats["edge_pixels"] = counts["edge_pixels"]
     traced_mask = pattern.mask.copy()
     if extra:
