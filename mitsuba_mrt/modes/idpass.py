@@ -22,7 +22,9 @@ import numpy as np
 from ..recon.compose import demodulate
 from ..recon.mixed import unmix_edges
 from ..recon.sampling import SamplePattern, cell_coordinates
-from ..recon.within_region import GridValues, black_background, interpolate_within_ids
+from ..recon.within_region import (GridValues, black_background, early_values,
+                                   interpolate_within_ids)
+from ..runtime.threads import beside
 from ..types import (MRTParams, Reconstruction, SeedStream, Skips, SparseTrace, Timings, Tracer,
                      check_radiance)
 
@@ -62,11 +64,16 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     stats = Counter()
     height, width = pattern.height, pattern.width
     start = time.perf_counter()
+    grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
+    # irradiance over a power of two per channel: float32 work cannot overflow
+    grid = GridValues.from_samples(pattern, grid_ids, demodulate(trace.radiance, trace.albedo))
+    early = beside(early_values, pattern, grid_ids, grid.values)  # the cubic, beside the id pass
+    grid_s = time.perf_counter() - start
+    start = time.perf_counter()
     every = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
     aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False, replay=True)
     id_map = aov.ids(rule).reshape(height, width)
     albedo = np.asarray(aov.albedo, dtype=np.float64).reshape(height, width, 3)
-    grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     missing = unsupported_pixels(pattern, grid_ids, id_map)
     missing[np.ix_(pattern.rows, pattern.cols)] = False
     extra_xy = np.argwhere(missing)[:, ::-1]
@@ -76,11 +83,10 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     edges_s = time.perf_counter() - start - id_pass_s - (extra.seconds if extra else 0.0)
 
     start = time.perf_counter()
-    # irradiance over a power of two per channel: float32 work cannot overflow
-    grid = GridValues.from_samples(pattern, grid_ids, demodulate(trace.radiance, trace.albedo))
     constant = black_background(grid_ids.ravel(), trace.radiance, stats)
     skips = Skips(background=stats.pop("background", 0))
-    interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values, id_map, constant)
+    interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values, id_map, constant,
+                                                 early.result())
     traced_mask = pattern.mask.copy()
     traced_mask[extra_xy[:, 1], extra_xy[:, 0]] = True
     # float64: traced pixels go in exactly
@@ -95,6 +101,6 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     stats["unmixed_pixels"] = int(unmixed.sum())
     stats["fireflies"] = grid.fireflies
     timings = Timings(trace_more=id_pass_s + (extra.seconds if extra else 0.0), edges=edges_s,
-                      interpolate=time.perf_counter() - start)
+                      interpolate=grid_s + time.perf_counter() - start)
     return Reconstruction(image, id_map, traced_mask, timings, skips, stats, unmixed)
 
