@@ -66,6 +66,9 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
     total = values.copy()          # the sample itself, weight 1
     weight = np.ones((nr, nc))
     scale = -0.5 / (strength * strength * channels)
+    # a pair's weight before ``usable`` is the same from either end: each
+    # shift's is kept for the opposite shift, which reads the same pairs
+    pairs = {}
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             if not (dy or dx):
@@ -73,16 +76,27 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
             # the overlap of the grid and its shift by (dy, dx): here <- there
             here = (slice(max(0, -dy), nr - max(0, dy)), slice(max(0, -dx), nc - max(0, dx)))
             there = (slice(max(0, dy), nr + min(0, dy)), slice(max(0, dx), nc + min(0, dx)))
-            diff = values[here] - values[there]
-            combined = noise[here] + noise[there]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = np.where(combined > 0, diff * diff / combined,
-                                 np.where(diff == 0, 0.0, np.inf))
-            w = np.exp(scale * ratio.sum(axis=-1))
-            w *= (grid_ids[here] == grid_ids[there]) & usable[there]
+            base = pairs.pop((-dy, -dx), None)
+            if base is None:
+                base = pairs[dy, dx] = _pair_weights(values[here], values[there], noise[here],
+                                                     noise[there], scale,
+                                                     grid_ids[here] == grid_ids[there])
+            w = base * usable[there]
             total[here] += w[..., None] * values[there]
             weight[here] += w
     out = total / weight[..., None]
     keep = ~usable | (noise.max(axis=-1) <= 0)
     out[keep] = values[keep]
     return out
+
+
+def _pair_weights(a: np.ndarray, b: np.ndarray, noise_a: np.ndarray, noise_b: np.ndarray,
+                  scale: float, same_id: np.ndarray) -> np.ndarray:
+    """The weights of the pairs of samples ``a`` and ``b`` (elementwise):
+    ``exp(scale * sum_c d_c^2 / combined noise_c)``, 0 across ids; the same
+    for (``b``, ``a``), bit for bit."""
+    diff = a - b
+    combined = noise_a + noise_b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(combined > 0, diff * diff / combined, np.where(diff == 0, 0.0, np.inf))
+    return np.exp(scale * ratio.sum(axis=-1)) * same_id
