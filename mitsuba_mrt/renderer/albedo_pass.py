@@ -51,16 +51,21 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
     :data:`ALBEDO_SAMPLES` are taken.  ``surface`` is what the pixels'
     centres see, (shape index, mirror path) per pixel, or None; with it, and
     when ``pixel_xy`` is every pixel of the image, the pass takes two steps
-    (see the module), else one.
+    (see the module), else one; with it the samples' normal is not developed
+    (zero: the trace takes the centres').
     """
     count = min(sampler.sample_count(), ALBEDO_SAMPLES)
     width, height = (int(v) for v in sensor.film().crop_size())
+    # with the centres' surface the trace takes their normal: the samples' is not developed
+    normals = surface is None
     if surface is None or count == 1 or not _every_pixel(pixel_xy, width, height):
         sampler.set_sample_count(count)
-        return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box)
+        return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box,
+                       normals=normals)
     sampler.set_sample_count(1)
     # each sample in its own pixel: where the albedo is one, the filter changes nothing
-    first = develop(scene, sensor, None, sampler, pixel_xy, 1, seed, True, replay, True)
+    first = develop(scene, sensor, None, sampler, pixel_xy, 1, seed, True, replay, True,
+                    normals=False)
     reach = _reach(None if box else sensor.film().rfilter())
     again = varied_pixels(pixel_xy, width, height, first.albedo, surface, reach)
     if again.any():
@@ -150,7 +155,7 @@ def _second_step(develop, scene, sensor, sampler, pixel_xy, reach, count, seed, 
         traced = np.concatenate([traced, pad])
     if sources is None:
         return _first_rows(develop(scene, sensor, None, sampler, traced, count, seed, True,
-                                   replay, box), len(pixel_xy))
+                                   replay, box, normals=False), len(pixel_xy))
     return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box,
                    traced)
 

@@ -217,7 +217,7 @@ def _aligned_float(values: np.ndarray):
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
-                 box=False, sources=None, halves=False):
+                 box=False, sources=None, halves=False, normals=True):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -228,7 +228,9 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     to be ``mi.render``'s kind; pixels outside the image add nothing).
     ``sampler`` is :func:`_develop_scalar`'s; the kernels clone the sensor's own.
     With ``halves`` the odd-numbered samples of each pixel are also developed
-    on their own (``odd``).
+    on their own (``odd``).  Without ``normals`` (a caller that takes the
+    normal of each pixel's centre instead) some pixels' samples add up no
+    normal, and their ``normal`` is zero.
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -243,7 +245,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
-              MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves))
+              MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
+              bool(albedo and (normals or splat)))
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
@@ -254,7 +257,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
         sums = list(np.ascontiguousarray((sums if in_order else sums[index]).T))
         return _read_sums(sums, integrator is not None)
-    return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves))
+    return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves),
+                     bool(albedo and normals))
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
@@ -274,7 +278,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     a second kernel over every lane to write back.
     """
     (n, spp, _, albedo, every, splat, width, height, crop_offset, sample_border, radius, cells,
-     box, bounces, halves) = layout
+     box, bounces, halves, normals) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
     cell = 2.0 * radius / cells
@@ -336,17 +340,29 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     # The pixel index comes from the opaque spp, and the mode is fixed
     # (``Auto`` switches to per-core copies for small arrays): the kernel is
     # the same at every spp and pixel count.
-    sums = [dr.zeros(mi.Float, n) for _ in values]
-    for total, value in zip(sums, values):
-        dr.scatter_reduce(dr.ReduceOp.Add, total, value, owner, mode=dr.ReduceMode.Local)
-    return _packed(_developed_channels(sums, integrator is not None, albedo), n)
+    # only the channels read after (no normal's where the caller takes the centre's)
+    read = _read_channels(integrator is not None, albedo, normals, halves)
+    sums = [dr.zeros(mi.Float, n) if k in read else None for k in range(len(values))]
+    for k in read:
+        dr.scatter_reduce(dr.ReduceOp.Add, sums[k], values[k], owner, mode=dr.ReduceMode.Local)
+    return _packed(_developed_channels(sums, integrator is not None, albedo, normals), n)
 
 
-def _developed_channels(sums: list, radiance: bool, albedo: bool) -> list:
+def _read_channels(radiance: bool, albedo: bool, normals: bool, halves: bool) -> list:
+    """The channels of :data:`_CHANNELS` (and the halves') that
+    :func:`_developed_channels` reads."""
+    read = list(range(0, 8)) + [12] if radiance else []
+    read += list(range(8, 12)) if albedo else []
+    read += list(range(13, 16)) if albedo and normals else []
+    return read + (list(range(_CHANNELS, _CHANNELS + _HALF_CHANNELS)) if halves else [])
+
+
+def _developed_channels(sums: list, radiance: bool, albedo: bool, normals: bool = True) -> list:
     """:func:`_read_sums`'s values as Dr.Jit channels, from the sums'
     (float32, in the kernel), those traced alone: with ``radiance`` the RGB
-    (3), alpha and the mean square (3); with ``albedo`` the albedo (3) and
-    normal (3); with the halves' sums the odd samples' RGB (3)."""
+    (3), alpha and the mean square (3); with ``albedo`` the albedo (3) and,
+    with ``normals``, the normal (3); with the halves' sums the odd samples'
+    RGB (3)."""
     def per(weight):  # 0 where nothing was accumulated
         return dr.select(weight != 0.0, 1.0 / dr.select(weight != 0.0, weight, 1.0), 0.0)
 
@@ -359,7 +375,8 @@ def _developed_channels(sums: list, radiance: bool, albedo: bool) -> list:
     if albedo:
         per_albedo_weight = per(dr.maximum(sums[11], 0.0))
         out += [dr.clip(c * per_albedo_weight, 0.0, 1.0) for c in sums[8:11]]
-        out += [dr.clip(c * per_albedo_weight, -1.0, 1.0) for c in sums[13:16]]
+        if normals:
+            out += [dr.clip(c * per_albedo_weight, -1.0, 1.0) for c in sums[13:16]]
     if len(sums) > _CHANNELS:  # the odd-numbered samples' own mean
         per_odd = per(sums[_CHANNELS + 3])
         out += [c * per_odd for c in sums[_CHANNELS:_CHANNELS + 3]]
@@ -378,7 +395,8 @@ def _packed(channels: list, n: int):
     return out
 
 
-def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool) -> _Developed:
+def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
+              normals: bool = True) -> _Developed:
     """The :class:`_Developed` of :func:`_packed`'s array of
     :func:`_developed_channels` (float64 fields; zeros where not traced)."""
     values, at = np.asarray(packed).reshape(n, -1), [0]
@@ -392,7 +410,8 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool) -> _De
     rgb, alpha, second = (take(3), take(1).reshape(n), take(3)) if radiance else (
         np.zeros((n, 3)), np.zeros(n), None)
     variance = np.zeros((n, 3)) if second is None else _variance(second, rgb)
-    guide = (take(3), take(3)) if albedo else (np.zeros((n, 3)), np.zeros((n, 3)))
+    guide = (take(3), take(3) if normals else np.zeros((n, 3))) if albedo else (
+        np.zeros((n, 3)), np.zeros((n, 3)))
     odd = take(3) if halves else None
     return _Developed(rgb, alpha, variance, *guide, odd)
 
@@ -423,8 +442,9 @@ def box_filter():
 
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                    replay=False, box=False, sources=None, halves=False):
-    """The scalar variant's :func:`_develop_jit`: sample by sample in Python."""
+                    replay=False, box=False, sources=None, halves=False, normals=True):
+    """The scalar variant's :func:`_develop_jit`: sample by sample in Python
+    (the normals are developed whatever ``normals`` says)."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     rfilter = box_filter() if box else film.rfilter()

@@ -109,7 +109,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     develop = _develop_jit if is_jit() else _develop_scalar
     if radiance:
         samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed,
-                          aovs and albedo, replay, box, halves=halves)
+                          aovs and albedo, replay, box, halves=halves, normals=not ids)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
