@@ -228,9 +228,9 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     to be ``mi.render``'s kind; pixels outside the image add nothing).
     ``sampler`` is :func:`_develop_scalar`'s; the kernels clone the sensor's own.
     With ``halves`` the odd-numbered samples of each pixel are also developed
-    on their own (``odd``).  Without ``normals`` (a caller that takes the
-    normal of each pixel's centre instead) some pixels' samples add up no
-    normal, and their ``normal`` is zero.
+    on their own (``odd``).  Only the channels that are read are added up:
+    without ``normals`` (a caller that takes the normal of each pixel's
+    centre instead) no normal, and ``normal`` is zero.
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -241,21 +241,25 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     splat = every and (sources is not None or not box)
     traced = pixel_xy if sources is None else sources
     n = len(traced)
+    read = _read_channels(integrator is not None, bool(albedo), bool(normals), bool(halves))
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
-              bool(albedo and (normals or splat)))
+              bool(albedo and normals))
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
-    if splat:
-        sums = sums.numpy().reshape(width * height, _channels(halves))
+    if splat:  # the block holds the channels read, in order; the others are zero
+        block = sums.numpy().reshape(width * height, len(read))
         index = pixel_xy[:, 1] * width + pixel_xy[:, 0]
         in_order = len(index) == width * height and bool((index == np.arange(len(index))).all())
-        sums = list(np.ascontiguousarray((sums if in_order else sums[index]).T))
+        rows = np.ascontiguousarray((block if in_order else block[index]).T)
+        sums = [np.zeros(len(pixel_xy), dtype=rows.dtype) for _ in range(_channels(halves))]
+        for row, k in zip(rows, read):
+            sums[k] = row
         return _read_sums(sums, integrator is not None)
     return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves),
                      bool(albedo and normals))
@@ -333,15 +337,15 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     # no channel of every sample is written out (0.4 GB at 1000 x 1000, a
     # tenth traced, 64 spp) to be reduced after, which a fresh process pays
     # for in page faults.
+    # only the channels read after (no normal's where the caller takes the centre's)
+    read = _read_channels(integrator is not None, albedo, normals, halves)
     if splat:
-        block = _new_block(film, rfilter, halves)
-        block.put(position + mi.ScalarVector2f(crop_offset), values, active)
+        block = _new_block(film, rfilter, len(read))
+        block.put(position + mi.ScalarVector2f(crop_offset), [values[k] for k in read], active)
         return block.tensor()
     # The pixel index comes from the opaque spp, and the mode is fixed
     # (``Auto`` switches to per-core copies for small arrays): the kernel is
     # the same at every spp and pixel count.
-    # only the channels read after (no normal's where the caller takes the centre's)
-    read = _read_channels(integrator is not None, albedo, normals, halves)
     sums = [dr.zeros(mi.Float, n) if k in read else None for k in range(len(values))]
     for k in read:
         dr.scatter_reduce(dr.ReduceOp.Add, sums[k], values[k], owner, mode=dr.ReduceMode.Local)
@@ -424,9 +428,9 @@ def _variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
     return variance
 
 
-def _new_block(film, rfilter, halves: bool = False) -> mi.ImageBlock:
+def _new_block(film, rfilter, channels: int) -> mi.ImageBlock:
     return mi.ImageBlock(size=film.crop_size(), offset=film.crop_offset(),
-                         channel_count=_channels(halves), rfilter=rfilter, border=False)
+                         channel_count=channels, rfilter=rfilter, border=False)
 
 
 #: The box pixel filter of each variant, made on first use.
@@ -452,7 +456,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
     every = sources is not None or _every_pixel(pixel_xy, width, height)
     traced = pixel_xy if sources is None else sources
     offset = mi.ScalarVector2f(film.crop_offset())
-    block = _new_block(film, rfilter, halves) if every else None
+    block = _new_block(film, rfilter, _channels(halves)) if every else None
     sums = np.zeros((len(pixel_xy), _channels(halves)))
     for k, (x, y) in enumerate(traced.tolist()):
         sampler.seed((seed * 0x9E3779B1 + k) & 0xFFFFFFFF)  # a 32-bit seed per pixel
