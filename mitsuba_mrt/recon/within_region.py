@@ -551,14 +551,6 @@ def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.n
     return grid, constant, counts, early, grid.radiance(early.image, parallel=False)
 
 
-def interpolate_traced_grid(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
-                            sample_ids: np.ndarray,
-                            id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
-    """Radiance at every pixel from the traced grid, within each pixel's id
-    (both halves of :class:`TracedGridValues` in one call)."""
-    return TracedGridValues.start(pattern, radiance, albedo, sample_ids).finish(id_map)
-
-
 def black_background(sample_ids: np.ndarray, radiance: np.ndarray, counts: Counter,
                      background: int = 0) -> dict:
     """``{background: 0.0}`` when every sample of the ``background`` id is

@@ -72,8 +72,7 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
         sampler.set_sample_count(count)
         second = _second_step(develop, scene, sensor, sampler, pixel_xy[again], reach, count,
                               (seed + SECOND_SEED) & 0xFFFFFFFF, replay, box)
-        first.albedo[again] = second.albedo
-        first.normal[again] = second.normal
+        first.albedo[again] = second.albedo  # (no normals: the trace takes the centres')
     return first
 
 
