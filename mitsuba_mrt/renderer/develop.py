@@ -38,8 +38,17 @@ VARIANCE_FLOOR = 1e-6
 #: alpha, the weight, RGB squared (for the variance), albedo and its weight,
 #: the count of samples whose radiance was NaN or Inf, and the shading normal
 #: (weighted as the albedo); with ``halves``, also the weighted RGB of the
-#: odd-numbered samples and their weight (:data:`_HALF_CHANNELS` more).
-_CHANNELS, _HALF_CHANNELS = 16, 4
+#: odd-numbered samples and their weight (:data:`_HALF_CHANNELS` more); with
+#: the albedo of a few samples, its square (:data:`_SQUARE_CHANNELS`, after
+#: the others).
+_CHANNELS, _HALF_CHANNELS, _SQUARE_CHANNELS = 16, 4, 3
+
+#: Samples per pixel whose albedo is traced where every shape's albedo is one
+#: colour (:func:`.scene_query.albedo_per_shape`): where they all hit one
+#: surface, or none, their albedo is the pixel's; where they disagree, the
+#: caller traces the pixel's albedo again (``albedo_varies``).  A sample's
+#: albedo costs a ray from the camera and a BSDF sample, beside the radiance's.
+ALBEDO_FIRST_SAMPLES = 4
 
 
 def _channels(halves: bool) -> int:
@@ -57,6 +66,8 @@ class _Developed:
     albedo: np.ndarray    # (n, 3)
     normal: np.ndarray | None = None  # (n, 3) the samples' mean shading normal
     odd: np.ndarray | None = None     # (n, 3) the mean RGB of the odd-numbered samples
+    # (n,) where the albedo came from a few samples: whether they disagreed
+    albedo_varies: np.ndarray | None = None
 
 
 def _camera_ray(sensor, sampler, position, spp, centre: bool = False):
@@ -217,7 +228,7 @@ def _aligned_float(values: np.ndarray):
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
-                 box=False, sources=None, halves=False, normals=True):
+                 box=False, sources=None, halves=False, normals=True, albedo_samples=0):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -230,7 +241,11 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     With ``halves`` the odd-numbered samples of each pixel are also developed
     on their own (``odd``).  Only the channels that are read are added up:
     without ``normals`` (a caller that takes the normal of each pixel's
-    centre instead) no normal, and ``normal`` is zero.
+    centre instead) no normal, and ``normal`` is zero.  With
+    ``albedo_samples`` (not where the samples are splatted or a filter's
+    negative lobe weighs them -1), only each pixel's first that many samples
+    trace the albedo, and ``albedo_varies`` says whether they disagreed (or
+    some missed every surface).
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -241,13 +256,16 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     splat = every and (sources is not None or not box)
     traced = pixel_xy if sources is None else sources
     n = len(traced)
-    read = _read_channels(integrator is not None, bool(albedo), bool(normals), bool(halves))
+    few = (int(albedo_samples) if albedo and integrator is not None and not splat
+           and not table.negative and albedo_samples > 0 else 0)
+    read = _read_channels(integrator is not None, bool(albedo), bool(normals), bool(halves),
+                          bool(few))
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
-              bool(albedo and normals))
+              bool(albedo and normals), few)
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
@@ -262,7 +280,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
             sums[k] = row
         return _read_sums(sums, integrator is not None)
     return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves),
-                     bool(albedo and normals))
+                     bool(albedo and normals), bool(few))
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
@@ -282,7 +300,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     a second kernel over every lane to write back.
     """
     (n, spp, _, albedo, every, splat, width, height, crop_offset, sample_border, radius, cells,
-     box, bounces, halves, normals) = layout
+     box, bounces, halves, normals, few) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
     cell = 2.0 * radius / cells
@@ -322,9 +340,12 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
         rgb = dr.select(active & finite, rgb, 0.0)
         alpha = dr.select(active & valid, 1.0, 0.0)
     a_weight, a_rgb, normal = zero, mi.Color3f(0.0), mi.Vector3f(0.0)
+    traces_albedo = active
+    if few:  # each pixel's first ``few`` samples (lanes are pixel-major)
+        traces_albedo = active & (dr.arange(mi.UInt32, n * spp) - owner * spp_input < few)
     if albedo:  # averaged over the samples that hit a surface
-        a_rgb, hit, normal = _albedo_along(scene, sampler, ray, active, bounces)
-        a_weight = dr.select(active & hit, weight, 0.0)
+        a_rgb, hit, normal = _albedo_along(scene, sampler, ray, traces_albedo, bounces)
+        a_weight = dr.select(traces_albedo & hit, weight, 0.0)
     values = [weight * rgb.x, weight * rgb.y, weight * rgb.z, weight * alpha, weight,
               weight * rgb.x ** 2, weight * rgb.y ** 2, weight * rgb.z ** 2,
               a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid,
@@ -333,12 +354,14 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
         lane = dr.arange(mi.UInt32, n * spp)
         odd = dr.select(((lane - owner * spp_input) & 1) == 1, weight, 0.0)
         values += [odd * rgb.x, odd * rgb.y, odd * rgb.z, odd]
+    if few:  # how far they spread
+        values += [a_weight * a_rgb.x ** 2, a_weight * a_rgb.y ** 2, a_weight * a_rgb.z ** 2]
     # The block's scatters, or the sums' below, run in the samples' own kernel:
     # no channel of every sample is written out (0.4 GB at 1000 x 1000, a
     # tenth traced, 64 spp) to be reduced after, which a fresh process pays
     # for in page faults.
     # only the channels read after (no normal's where the caller takes the centre's)
-    read = _read_channels(integrator is not None, albedo, normals, halves)
+    read = _read_channels(integrator is not None, albedo, normals, halves, bool(few))
     if splat:
         block = _new_block(film, rfilter, len(read))
         block.put(position + mi.ScalarVector2f(crop_offset), [values[k] for k in read], active)
@@ -347,26 +370,40 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     # (``Auto`` switches to per-core copies for small arrays): the kernel is
     # the same at every spp and pixel count.
     sums = [dr.zeros(mi.Float, n) if k in read else None for k in range(len(values))]
-    for k in read:
-        dr.scatter_reduce(dr.ReduceOp.Add, sums[k], values[k], owner, mode=dr.ReduceMode.Local)
-    return _packed(_developed_channels(sums, integrator is not None, albedo, normals), n)
+    albedo_channels = set(range(8, 12)) | set(range(13, 16))
+    if few:
+        albedo_channels |= set(range(len(values) - _SQUARE_CHANNELS, len(values)))
+    for k in read:  # (the lanes that trace no albedo add none to its channels)
+        mask = traces_albedo if few and k in albedo_channels else True
+        dr.scatter_reduce(dr.ReduceOp.Add, sums[k], values[k], owner, active=mask,
+                          mode=dr.ReduceMode.Local)
+    few_traced = dr.minimum(mi.Float(few), mi.Float(spp_input)) if few else None
+    return _packed(_developed_channels(sums, integrator is not None, albedo, normals, few_traced),
+                   n)
 
 
-def _read_channels(radiance: bool, albedo: bool, normals: bool, halves: bool) -> list:
-    """The channels of :data:`_CHANNELS` (and the halves') that
-    :func:`_developed_channels` reads."""
+def _read_channels(radiance: bool, albedo: bool, normals: bool, halves: bool,
+                   squares: bool = False) -> list:
+    """The channels of :data:`_CHANNELS` (and the halves', and the albedo's
+    squares) that :func:`_developed_channels` reads."""
     read = list(range(0, 8)) + [12] if radiance else []
     read += list(range(8, 12)) if albedo else []
     read += list(range(13, 16)) if albedo and normals else []
-    return read + (list(range(_CHANNELS, _CHANNELS + _HALF_CHANNELS)) if halves else [])
+    read += list(range(_CHANNELS, _CHANNELS + _HALF_CHANNELS)) if halves else []
+    first = _channels(halves)
+    return read + (list(range(first, first + _SQUARE_CHANNELS)) if squares else [])
 
 
-def _developed_channels(sums: list, radiance: bool, albedo: bool, normals: bool = True) -> list:
+def _developed_channels(sums: list, radiance: bool, albedo: bool, normals: bool = True,
+                        few=None) -> list:
     """:func:`_read_sums`'s values as Dr.Jit channels, from the sums'
     (float32, in the kernel), those traced alone: with ``radiance`` the RGB
     (3), alpha and the mean square (3); with ``albedo`` the albedo (3) and,
     with ``normals``, the normal (3); with the halves' sums the odd samples'
-    RGB (3)."""
+    RGB (3); with the albedo of ``few`` samples (a Dr.Jit value: the fewer
+    of those asked for and the spp), whether they disagreed (1:
+    a spread beyond the float32 sums' rounding, or some of them hit no
+    surface while others did)."""
     def per(weight):  # 0 where nothing was accumulated
         return dr.select(weight != 0.0, 1.0 / dr.select(weight != 0.0, weight, 1.0), 0.0)
 
@@ -381,9 +418,16 @@ def _developed_channels(sums: list, radiance: bool, albedo: bool, normals: bool 
         out += [dr.clip(c * per_albedo_weight, 0.0, 1.0) for c in sums[8:11]]
         if normals:
             out += [dr.clip(c * per_albedo_weight, -1.0, 1.0) for c in sums[13:16]]
-    if len(sums) > _CHANNELS:  # the odd-numbered samples' own mean
+    squares = 0 if few is None else _SQUARE_CHANNELS
+    if len(sums) - squares > _CHANNELS:  # the odd samples' mean
         per_odd = per(sums[_CHANNELS + 3])
         out += [c * per_odd for c in sums[_CHANNELS:_CHANNELS + 3]]
+    if squares:
+        per_albedo_weight = per(dr.maximum(sums[11], 0.0))
+        square = sum(c * per_albedo_weight for c in sums[-_SQUARE_CHANNELS:])
+        spread = square - sum((c * per_albedo_weight) ** 2 for c in sums[8:11])
+        some = (sums[11] > 0.0) & (sums[11] < few)
+        out.append(dr.select((spread > VARIANCE_FLOOR * square) | some, 1.0, 0.0))
     return out
 
 
@@ -400,7 +444,7 @@ def _packed(channels: list, n: int):
 
 
 def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
-              normals: bool = True) -> _Developed:
+              normals: bool = True, few: bool = False) -> _Developed:
     """The :class:`_Developed` of :func:`_packed`'s array of
     :func:`_developed_channels` (float64 fields; zeros where not traced)."""
     values, at = np.asarray(packed).reshape(n, -1), [0]
@@ -417,7 +461,8 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
     guide = (take(3), take(3) if normals else np.zeros((n, 3))) if albedo else (
         np.zeros((n, 3)), np.zeros((n, 3)))
     odd = take(3) if halves else None
-    return _Developed(rgb, alpha, variance, *guide, odd)
+    varies = take(1).reshape(n) > 0.0 if few else None
+    return _Developed(rgb, alpha, variance, *guide, odd, varies)
 
 
 def _variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
@@ -446,9 +491,11 @@ def box_filter():
 
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                    replay=False, box=False, sources=None, halves=False, normals=True):
+                    replay=False, box=False, sources=None, halves=False, normals=True,
+                    albedo_samples=0):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python
-    (the normals are developed whatever ``normals`` says)."""
+    (the normals are developed whatever ``normals`` says, and every sample's
+    albedo whatever ``albedo_samples`` says)."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     rfilter = box_filter() if box else film.rfilter()

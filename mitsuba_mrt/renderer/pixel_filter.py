@@ -35,11 +35,14 @@ class FilterTable:
         Cumulative mass at the cell boundaries, 0 to 1.
     pdf : ndarray, shape (TABLE_CELLS,)
         Density (per pixel) in each cell.
+    negative : bool
+        Whether the filter is negative somewhere (a sample's weight is then -1 there).
     """
 
     radius: float
     cdf: np.ndarray
     pdf: np.ndarray
+    negative: bool = False
 
     @property
     def cell(self) -> float:
@@ -63,13 +66,14 @@ class FilterTable:
     @classmethod
     def from_values(cls, radius: float, values: np.ndarray) -> "FilterTable":
         """The table of filter values at the cell centres."""
-        mass = np.abs(np.asarray(values, dtype=np.float64))
+        values = np.asarray(values, dtype=np.float64)
+        mass = np.abs(values)
         if not mass.sum() > 0:
             mass = np.ones_like(mass)
         cdf = np.concatenate([[0.0], np.cumsum(mass)]) / mass.sum()
         cdf[-1] = 1.0
         pdf = (mass / mass.sum()) / (2.0 * radius / len(mass))
-        return cls(float(radius), cdf, pdf)
+        return cls(float(radius), cdf, pdf, bool((values < 0).any()))
 
 
 #: Tables already made, by the filter's description (its type and parameters).

@@ -207,6 +207,26 @@ def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     return np.array([False] + shows(scene, lambda shape: diffuse(shape.bsdf()), all), dtype=bool)
 
 
+#: The parameters of a BSDF whose albedo is one colour: a smooth diffuse
+#: BSDF's constant reflectance, or that of the one inside a ``twosided``.
+_ONE_COLOUR = re.compile(r"(brdf_\d+\.)?reflectance\.value")
+
+
+def albedo_per_shape(scene: mi.Scene) -> bool:
+    """Whether every shape's albedo is one colour, the same for every sample
+    that hits it: each BSDF a smooth ``diffuse`` (or a ``twosided`` one) of
+    a constant reflectance, whose albedo is that reflectance at every hit.
+    A pixel's albedo then needs only a few samples where they all hit one
+    surface (:data:`~.develop.ALBEDO_FIRST_SAMPLES`)."""
+    def one_colour(bsdf) -> bool:
+        if bsdf is None or bsdf.class_name() not in ("SmoothDiffuse", "TwoSidedBRDF"):
+            return False
+        keys = list(mi.traverse(bsdf).keys())
+        return bool(keys) and all(_ONE_COLOUR.fullmatch(k) for k in keys)
+
+    return all(shows(scene, lambda shape: one_colour(shape.bsdf()), all))
+
+
 def textured_diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     """:func:`diffuse_shapes`, only those whose reflectance is not one
     colour (a bitmap, a procedural texture, ...): those whose radiance a

@@ -18,19 +18,23 @@ import numpy as np
 from ..errors import MRTError
 from ..types import SparseTrace
 from .albedo_pass import albedo_pass
-from .develop import _develop_jit, _develop_scalar, _Developed
+from .develop import ALBEDO_FIRST_SAMPLES, _develop_jit, _develop_scalar, _Developed
 from .ids import _ids_jit, _ids_scalar
 from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
-from .scene_query import (_shape_lookup, curved_mirror_indices, replayable, set_sample_count,
-                          shadow_rule, tracked_lights)
+from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices, replayable,
+                          set_sample_count, shadow_rule, tracked_lights)
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.  Dark
 #: textures go far lower (black in an sRGB PNG is about 0.003 linear), and
 #: their pixels must be demodulated like their bright neighbours.
 ALBEDO_MIN = 0.001
+
+#: Added to a trace's seed for the albedo of the pixels whose first samples
+#: disagreed on it (:func:`trace_pixels`): numbers no other trace draws.
+RETRACE_SEED = 0x9E3779B9
 
 
 def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
@@ -108,8 +112,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     zero = np.zeros(n, np.int64)
     develop = _develop_jit if is_jit() else _develop_scalar
     if radiance:
-        samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed,
-                          aovs and albedo, replay, box, halves=halves, normals=not ids)
+        samples = _samples(develop, scene, sensor, integrator, sampler, pixel_xy, spp, seed,
+                           aovs and albedo, replay, box, halves, ids)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
@@ -137,3 +141,28 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        alpha=samples.alpha if radiance else None,
                        variance=samples.variance if radiance else None, normal=normal,
                        odd=samples.odd if radiance else None)
+
+
+def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, spp: int,
+             seed: int, albedo: bool, replay: bool, box: bool, halves: bool,
+             ids: bool) -> _Developed:
+    """The developed samples of ``pixel_xy``, their albedo (with ``albedo``)
+    from as few samples as it needs: where every shape's albedo is one colour
+    (:func:`.scene_query.albedo_per_shape`) and the ids give the normal,
+    from each pixel's first :data:`~.develop.ALBEDO_FIRST_SAMPLES`; where those
+    disagree (an edge), from an albedo trace of the pixel's own, as many
+    samples on a seed of their own."""
+    few = (ALBEDO_FIRST_SAMPLES if albedo and ids and not halves and is_jit()
+           and albedo_per_shape(scene) else 0)
+    samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
+                      replay, box, halves=halves, normals=not ids, albedo_samples=few)
+    if samples.albedo_varies is None or not samples.albedo_varies.any():
+        return samples
+    again = np.flatnonzero(samples.albedo_varies)
+    xy = pixel_xy[again]
+    size = padded_size(len(xy)) if replay and replay_active() else len(xy)
+    xy = np.concatenate([xy, np.repeat(xy[:1], size - len(xy), axis=0)])
+    samples.albedo[again] = develop(scene, sensor, None, sampler, xy, spp,
+                                    (seed + RETRACE_SEED) & 0xFFFFFFFF, True, replay, box,
+                                    normals=False).albedo[:len(again)]
+    return samples
