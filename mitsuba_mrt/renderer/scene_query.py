@@ -217,7 +217,11 @@ def albedo_per_shape(scene: mi.Scene) -> bool:
     that hits it: each BSDF a smooth ``diffuse`` (or a ``twosided`` one) of
     a constant reflectance, whose albedo is that reflectance at every hit.
     A pixel's albedo then needs only a few samples where they all hit one
-    surface (:data:`~.develop.ALBEDO_FIRST_SAMPLES`)."""
+    surface (:data:`~.develop.ALBEDO_FIRST_SAMPLES`).  Never in a spectral
+    variant: there each sample's albedo is that of its own wavelengths."""
+    if mi.is_spectral:
+        return False
+
     def one_colour(bsdf) -> bool:
         if bsdf is None or bsdf.class_name() not in ("SmoothDiffuse", "TwoSidedBRDF"):
             return False

@@ -106,3 +106,13 @@ def test_a_textured_scene_traces_every_samples_albedo(variant, monkeypatch):
     scene = _scene(textured)
     every, few = _traced(scene, monkeypatch, 0), _traced(scene, monkeypatch, 4)
     np.testing.assert_array_equal(few.albedo, every.albedo)
+
+
+def test_in_a_spectral_variant_every_sample_has_its_own_albedo(variant):
+    # each sample's albedo is that of its own wavelengths: a few would not do
+    try:
+        mi.set_variant("scalar_spectral")
+        assert not albedo_per_shape(_scene())
+    finally:
+        mi.set_variant(variant)
+    assert albedo_per_shape(_scene())
