@@ -174,6 +174,11 @@ class SparseTrace:
     odd : ndarray, shape (n, 3), optional
         Mean radiance of the pixel's odd-numbered samples (the second, the
         fourth, ...), where the trace was asked for its halves; else None.
+    albedo_per_shape : bool
+        Every shape's albedo is one colour (plain diffuse BSDFs, see
+        :func:`mitsuba_mrt.renderer.scene_query.albedo_per_shape`), so every
+        id's is too: radiance needs no division by albedo to be interpolated
+        (a pixel straddling two shapes mixes their albedos, as its radiance).
     """
 
     radiance: np.ndarray
@@ -190,6 +195,7 @@ class SparseTrace:
     variance: np.ndarray | None = None
     normal: np.ndarray | None = None
     odd: np.ndarray | None = None
+    albedo_per_shape: bool = False
 
     def ids(self, rule: str) -> np.ndarray:
         """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).

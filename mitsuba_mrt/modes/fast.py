@@ -51,7 +51,7 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     background = 0 if labels[0] == 0 else -1  # ids are >= 0, so id 0 is rank 0
     grid_ranks = sample_ranks.reshape(pattern.grid_shape)
     values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, sample_ranks,
-                                    background)  # beside the ids
+                                    background, trace.albedo_per_shape)  # beside the ids
     rank_map = pattern.nearest_image(grid_ranks)
     boxes = region_boxes(pattern, grid_ranks)  # one per id
     stats["regions"] = len(boxes)

@@ -242,7 +242,8 @@ def refine_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     start = time.perf_counter()
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     # the interpolation's half that needs no final ids, beside the edges' tracing
-    values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, grid_ids.ravel())
+    values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, grid_ids.ravel(),
+                                    albedo_constant=trace.albedo_per_shape)
     extra = []
 
     curved = trace.curved_mirror

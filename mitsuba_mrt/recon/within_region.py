@@ -509,11 +509,15 @@ class TracedGridValues:
 
     @classmethod
     def start(cls, pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
-              sample_ids: np.ndarray, background: int = 0) -> "TracedGridValues":
+              sample_ids: np.ndarray, background: int = 0,
+              albedo_constant: bool = False) -> "TracedGridValues":
         """Launch the id-independent half; ``background`` is the id (or rank)
-        of the background in ``sample_ids``, -1 if none."""
+        of the background in ``sample_ids``, -1 if none; ``albedo_constant``
+        says every id's albedo is one colour whatever the samples say (those
+        straddling two surfaces mix theirs)."""
         return cls(pattern, radiance, sample_ids.reshape(pattern.grid_shape),
-                   beside(_values_and_early, pattern, radiance, albedo, sample_ids, background))
+                   beside(_values_and_early, pattern, radiance, albedo, sample_ids, background,
+                          albedo_constant))
 
     def finish(self, id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
         """Radiance (height, width, 3), float64, with every pixel's values from
@@ -531,14 +535,18 @@ class TracedGridValues:
 
 
 def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
-                      sample_ids: np.ndarray, background: int = 0):
+                      sample_ids: np.ndarray, background: int = 0,
+                      albedo_constant: bool = False):
     """The grid values to interpolate (:class:`GridValues` of radiance, or of
-    irradiance and albedo), the constant ids, the shortcut counts,
-    :func:`early_values` of those values, and its radiance (float64)."""
+    irradiance and albedo where the albedo varies within an id), the constant
+    ids, the shortcut counts, :func:`early_values` of those values, and its
+    radiance (float64)."""
     counts = Counter()
-    albedo = safe_albedo(albedo)
     constant = black_background(sample_ids, radiance, counts, background)
-    if albedo_constant_per_id(sample_ids, albedo):
+    if not albedo_constant:
+        albedo = safe_albedo(albedo)
+        albedo_constant = albedo_constant_per_id(sample_ids, albedo)
+    if albedo_constant:
         counts["albedo_division"] += 1
         values = radiance
     else:

@@ -111,9 +111,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     replay = replay and is_jit() and replayable(scene)
     zero = np.zeros(n, np.int64)
     develop = _develop_jit if is_jit() else _develop_scalar
+    one_colour = aovs and albedo_per_shape(scene)
     if radiance:
         samples = _samples(develop, scene, sensor, integrator, sampler, pixel_xy, spp, seed,
-                           aovs and albedo, replay, box, halves, ids)
+                           aovs and albedo, replay, box, halves, ids, one_colour)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
@@ -140,20 +141,20 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        curved_mirror=np.isin(shape_index, curved) if len(curved) else None,
                        alpha=samples.alpha if radiance else None,
                        variance=samples.variance if radiance else None, normal=normal,
-                       odd=samples.odd if radiance else None)
+                       odd=samples.odd if radiance else None, albedo_per_shape=one_colour)
 
 
 def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, spp: int,
              seed: int, albedo: bool, replay: bool, box: bool, halves: bool,
-             ids: bool) -> _Developed:
+             ids: bool, one_colour: bool) -> _Developed:
     """The developed samples of ``pixel_xy``, their albedo (with ``albedo``)
     from as few samples as it needs: where every shape's albedo is one colour
-    (:func:`.scene_query.albedo_per_shape`) and the ids give the normal,
+    (``one_colour``: :func:`.scene_query.albedo_per_shape`) and the ids give the normal,
     from each pixel's first :data:`~.develop.ALBEDO_FIRST_SAMPLES`; where those
     disagree (an edge), from an albedo trace of the pixel's own, as many
     samples on a seed of their own."""
-    few = (ALBEDO_FIRST_SAMPLES if albedo and ids and not halves and is_jit()
-           and albedo_per_shape(scene) else 0)
+    few = (ALBEDO_FIRST_SAMPLES if one_colour and albedo and ids and not halves and is_jit()
+           else 0)
     samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
                       replay, box, halves=halves, normals=not ids, albedo_samples=few)
     if samples.albedo_varies is None or not samples.albedo_varies.any():

@@ -116,3 +116,21 @@ def test_in_a_spectral_variant_every_sample_has_its_own_albedo(variant):
     finally:
         mi.set_variant(variant)
     assert albedo_per_shape(_scene())
+
+
+@pytest.mark.parametrize("mode", ["fast", "refine"])
+def test_one_colour_per_shape_needs_no_division_by_albedo(variant, mode):
+    # the grid's pixels across the ball's silhouette mix two albedos, so the
+    # samples alone would not show every id's albedo to be one colour
+    import mitsuba_mrt
+    from mitsuba_mrt.recon.compose import albedo_constant_per_id
+
+    result = mitsuba_mrt.render(_scene(), mode=mode, sample_fraction=0.3)
+    trace = result.trace
+    assert trace.albedo_per_shape
+    assert not albedo_constant_per_id(trace.ids("exact"), trace.albedo)
+    assert result.skips.albedo_division == 1
+    textured = mitsuba_mrt.render(_scene(_shape('<bsdf type="diffuse"><texture '
+                                                'type="checkerboard" name="reflectance"/>'
+                                                '</bsdf>')), mode=mode, sample_fraction=0.3)
+    assert not textured.trace.albedo_per_shape and textured.skips.albedo_division == 0
