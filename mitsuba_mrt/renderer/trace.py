@@ -157,8 +157,8 @@ def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, 
            else 0)
     samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
                       replay, box, halves=halves, normals=not ids, albedo_samples=few)
-    if samples.albedo_varies is None or not samples.albedo_varies.any():
-        return samples
+    if spp <= few or samples.albedo_varies is None or not samples.albedo_varies.any():
+        return samples  # (every sample traced its albedo, or they all agreed)
     again = np.flatnonzero(samples.albedo_varies)
     xy = pixel_xy[again]
     size = padded_size(len(xy)) if replay and replay_active() else len(xy)

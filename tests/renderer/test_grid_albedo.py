@@ -100,6 +100,12 @@ def test_pixels_whose_first_samples_disagree_trace_their_albedo_again(variant, m
     assert (np.abs(traced.albedo[varies] - first.albedo[varies]).max(axis=1) > 0).mean() > 0.5
 
 
+def test_as_many_first_samples_as_the_spp_are_every_samples_albedo(variant, monkeypatch):
+    scene = _scene()
+    every, few = _traced(scene, monkeypatch, 0), _traced(scene, monkeypatch, SPP)
+    np.testing.assert_allclose(few.albedo, every.albedo, rtol=0, atol=1e-6)
+
+
 def test_a_textured_scene_traces_every_samples_albedo(variant, monkeypatch):
     textured = _shape('<bsdf type="diffuse"><texture type="checkerboard" '
                       'name="reflectance"/></bsdf>')
