@@ -149,10 +149,10 @@ def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, 
              ids: bool, one_colour: bool) -> _Developed:
     """The developed samples of ``pixel_xy``, their albedo (with ``albedo``)
     from as few samples as it needs: where every shape's albedo is one colour
-    (``one_colour``: :func:`.scene_query.albedo_per_shape`) and the ids give the normal,
-    from each pixel's first :data:`~.develop.ALBEDO_FIRST_SAMPLES`; where those
-    disagree (an edge), from an albedo trace of the pixel's own, as many
-    samples on a seed of their own."""
+    (``one_colour``: :func:`.scene_query.albedo_per_shape`) and the ids give
+    the normal, from each pixel's first :data:`~.develop.ALBEDO_FIRST_SAMPLES`;
+    where those disagree (an edge), from an albedo trace of the pixel's own,
+    as many samples on a seed of their own."""
     few = (ALBEDO_FIRST_SAMPLES if one_colour and albedo and ids and not halves and is_jit()
            else 0)
     samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
