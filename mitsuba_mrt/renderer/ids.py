@@ -167,7 +167,7 @@ def _with_side(path: np.ndarray, back: np.ndarray) -> np.ndarray:
 def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     """Shape, visible lights, mirror chain and side of every pixel's centre ray."""
     n = len(pixel_xy)
-    layout = (n, rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
+    layout = (rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
     mask, pointers, inner, chain, normal, back = _IDS(
         scene, sensor, lights, _aligned_float(pixel_xy[:, 0]), _aligned_float(pixel_xy[:, 1]),
         layout, objects=(scene, sensor), record=replay)
@@ -195,7 +195,7 @@ def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
     the pointer of the shape inside an instance's group (0 elsewhere), mirror
     chain, shading normal, whether the surface is seen from its back) of each
     pixel's centre ray, every input an argument as :func:`.develop._develop_kernel`'s."""
-    _, rule, mirrors, _ = layout
+    rule, mirrors, _ = layout
     position = mi.Point2f(pixel_x + 0.5, pixel_y + 0.5)
     ray, _ = _camera_ray(sensor, None, position, 1, centre=True)  # no random numbers
     si, valid, mask, chain = _surface_aovs(scene, ray, lights, rule, mirrors)
