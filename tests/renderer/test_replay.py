@@ -17,6 +17,11 @@ PATH_SCENE = small_scene_xml(24, '<integrator type="path"><integer name="max_dep
                                  '</integrator>', extra='<emitter type="constant"/>')
 
 
+MIRROR = ('<shape type="rectangle"><transform name="to_world"><scale value="2"/>'
+          '<rotate y="1" angle="60"/><translate x="2.5"/></transform>'
+          '<bsdf type="conductor"/></shape>')
+
+
 def _trace(scene, integrator, xy, replay, seed=3, **kwargs):
     return trace_pixels(scene, scene.sensors()[0], integrator, xy, 4, seed, replay=replay,
                         **kwargs)
@@ -101,6 +106,24 @@ def test_replay_sees_a_changed_parameter():
     replayed, plain = _trace(scene, integrator, xy, True), _trace(scene, integrator, xy, False)
     np.testing.assert_array_equal(replayed.radiance, plain.radiance)
     assert not np.array_equal(replayed.radiance, before)
+
+
+def test_one_id_recording_serves_every_pixel_count():
+    # the id kernel's recording is keyed without the count: a set of another
+    # size replays it, and must come out as its own plain trace
+    from mitsuba_mrt.renderer import ids
+
+    scene = mi.load_string(small_scene_xml(24, extra=MIRROR))
+    every = np.stack(np.meshgrid(np.arange(24), np.arange(24)), -1).reshape(-1, 2)
+    before = ids._IDS.n_recordings
+    for xy in (grid_pattern(24, 24, 0.1).pixel_xy, every, every[::7]):
+        replayed = _trace(scene, scene.integrator(), xy, True, radiance=False, albedo=False)
+        plain = _trace(scene, scene.integrator(), xy, False, radiance=False, albedo=False)
+        for a, b in zip((replayed.path_id, replayed.visible_lights, replayed.normal),
+                        (plain.path_id, plain.visible_lights, plain.normal)):
+            np.testing.assert_array_equal(a, b)
+    assert (plain.path_id != plain.shape_index).any()  # the mirror's chains among them
+    assert ids._IDS.n_recordings == before + 1
 
 
 def test_renders_replay_the_grid():
