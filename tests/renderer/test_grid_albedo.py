@@ -140,3 +140,17 @@ def test_one_colour_per_shape_needs_no_division_by_albedo(variant, mode):
                                                 'type="checkerboard" name="reflectance"/>'
                                                 '</bsdf>')), mode=mode, sample_fraction=0.3)
     assert not textured.trace.albedo_per_shape and textured.skips.albedo_division == 0
+
+
+def test_a_filter_with_negative_lobes_keeps_every_samples_albedo(variant, monkeypatch):
+    # a negative lobe weighs its samples -1: the squares' spread says nothing there
+    from mitsuba_mrt.renderer.pixel_filter import filter_table
+
+    assert filter_table(mi.load_dict({"type": "lanczos"})).negative
+    assert not filter_table(mi.load_dict({"type": "gaussian"})).negative
+    xml = small_scene_xml(RES).replace('<rfilter type="box"/>', '<rfilter type="lanczos"/>')
+    start = xml.index('<sampler type="stratified">')
+    stop = xml.index("</sampler>", start) + len("</sampler>")
+    scene = mi.load_string(xml[:start] + SAMPLER + xml[stop:])
+    every, few = _traced(scene, monkeypatch, 0), _traced(scene, monkeypatch, 4)
+    np.testing.assert_array_equal(few.albedo, every.albedo)
