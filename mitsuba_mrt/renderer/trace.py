@@ -98,10 +98,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     pixel_xy = np.asarray(pixel_xy, dtype=np.int64)
     n = len(pixel_xy)
     if pad and n and is_jit() and replay_active() and replayable(scene):
-        size = padded_size(n)
-        padded = np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], size - n, axis=0)])
-        return trace_pixels(scene, sensor, integrator, padded, spp, seed, aovs, radiance,
-                            replay=True, box=box, ids=ids, albedo=albedo,
+        return trace_pixels(scene, sensor, integrator, _padded(pixel_xy), spp, seed, aovs,
+                            radiance, replay=True, box=box, ids=ids, albedo=albedo,
                             halves=halves).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
@@ -160,10 +158,16 @@ def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, 
     if spp <= few or samples.albedo_varies is None or not samples.albedo_varies.any():
         return samples  # (every sample traced its albedo, or they all agreed)
     again = np.flatnonzero(samples.albedo_varies)
-    xy = pixel_xy[again]
-    size = padded_size(len(xy)) if replay and replay_active() else len(xy)
-    xy = np.concatenate([xy, np.repeat(xy[:1], size - len(xy), axis=0)])
+    xy = _padded(pixel_xy[again]) if replay and replay_active() else pixel_xy[again]
     samples.albedo[again] = develop(scene, sensor, None, sampler, xy, spp,
                                     (seed + RETRACE_SEED) & 0xFFFFFFFF, True, replay, box,
                                     normals=False).albedo[:len(again)]
     return samples
+
+
+def _padded(pixel_xy: np.ndarray) -> np.ndarray:
+    """``pixel_xy`` followed by copies of its first pixel up to
+    :func:`.replay.padded_size`: a set whose size changes from render to
+    render, traced at one of a few sizes that are recorded once."""
+    extra = padded_size(len(pixel_xy)) - len(pixel_xy)
+    return np.concatenate([pixel_xy, np.repeat(pixel_xy[:1], extra, axis=0)])
