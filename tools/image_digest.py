@@ -10,7 +10,9 @@ the two outputs::
 
 Every ``scenes_xml/*.xml`` is rendered at ``--res`` with the deterministic
 ``matte`` integrator in each explicit mode, and ``paper_fig1.xml`` also with
-``path`` (jittered, ``--spp``), which exercises the stochastic trace.
+``path`` (jittered, ``--spp``), which exercises the stochastic trace; with
+``--gallery`` also the gallery's scenes (textures, mirrors, instances, filters)
+at their own integrators and ``--spp``.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ def main(argv=None) -> int:
     parser.add_argument("--res", type=int, default=64)
     parser.add_argument("--spp", type=int, default=4)
     parser.add_argument("--variant", default="auto")
+    parser.add_argument("--gallery", action="store_true", help="add scenes_xml/gallery")
     args = parser.parse_args(argv)
     import mitsuba_mrt
 
@@ -46,6 +49,10 @@ def main(argv=None) -> int:
     jobs = [(path, {"res": args.res}) for path in sorted((ROOT / "scenes_xml").glob("*.xml"))]
     jobs.append((ROOT / "scenes_xml" / "paper_fig1.xml",
                  {"res": args.res, "integrator": "path", "spp": args.spp, "jitter": "true"}))
+    if args.gallery:  # (crop_rgba's crop window needs a film that holds it at its offset)
+        jobs += [(path, {"res": args.res, "spp": args.spp,
+                         **({"film_res": args.res + 128} if path.stem == "crop_rgba" else {})})
+                 for path in sorted((ROOT / "scenes_xml" / "gallery").glob("*.xml"))]
     for path, defines in jobs:
         scene = mitsuba_mrt.load_scene(path, **defines)
         for mode in MODES:

@@ -29,9 +29,9 @@ ID_RULES = ("paper", "exact")
 
 def blocked_count(visible_lights: np.ndarray, num_lights: int) -> np.ndarray:
     """Number of the ``num_lights`` lights whose bit is not set."""
-    visible = np.asarray(visible_lights, dtype=np.uint64)
-    bits = (visible[..., None] >> np.arange(num_lights, dtype=np.uint64)) & np.uint64(1)
-    return num_lights - bits.sum(axis=-1).astype(np.int64)
+    mask = np.uint64((1 << num_lights) - 1)
+    visible = np.asarray(visible_lights, dtype=np.uint64) & mask
+    return num_lights - np.bitwise_count(visible).astype(np.int64)
 
 
 def encode_ids(shape_index: np.ndarray, visible_lights: np.ndarray,

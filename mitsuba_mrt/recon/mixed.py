@@ -80,7 +80,8 @@ def unmix_edges(irradiance: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
     """
     irradiance = np.asarray(irradiance, dtype=np.float64)
     albedo = np.asarray(albedo, dtype=np.float64)
-    image = irradiance * safe_albedo(albedo)
+    image = safe_albedo(albedo)  # a new array: the product goes into it
+    image *= irradiance
     unmixed = np.zeros(ids.shape, dtype=bool)
     ys, xs = np.nonzero(edge_mask(ids) & ~keep)
     if not len(ys):

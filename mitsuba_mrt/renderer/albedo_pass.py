@@ -102,26 +102,34 @@ def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndar
     [0, 1, 1, 1, 1, 0]
     """
     x, y = pixel_xy[:, 0], pixel_xy[:, 1]
+    # the id pass's pixels come in the image's own order: its arrays are images already
+    in_order = len(pixel_xy) == width * height and bool(
+        (y * width + x == np.arange(len(pixel_xy))).all())
     changed = np.zeros((height, width), dtype=bool)
 
-    def mark(image: np.ndarray, differ) -> None:
-        across, down = differ(image[:, 1:], image[:, :-1]), differ(image[1:], image[:-1])
+    def mark(across: np.ndarray, down: np.ndarray) -> None:
         changed[:, 1:] |= across
         changed[:, :-1] |= across
         changed[1:] |= down
         changed[:-1] |= down
 
     def image_of(values: np.ndarray) -> np.ndarray:
-        image = np.zeros((height, width), dtype=values.dtype)
+        if in_order:
+            return values.reshape((height, width) + values.shape[1:])
+        image = np.zeros((height, width) + values.shape[1:], dtype=values.dtype)
         image[y, x] = values
         return image
 
     for key in surface:
-        mark(image_of(np.asarray(key)), np.not_equal)
-    for channel in range(albedo.shape[1]):
-        mark(image_of(albedo[:, channel]), lambda a, b: np.abs(a - b) > ALBEDO_TOLERANCE)
+        image = image_of(np.asarray(key))
+        mark(image[:, 1:] != image[:, :-1], image[1:] != image[:-1])
+    image = image_of(np.asarray(albedo))
+    for channel in range(image.shape[-1]):
+        c = image[..., channel]
+        mark(np.abs(c[:, 1:] - c[:, :-1]) > ALBEDO_TOLERANCE,
+             np.abs(c[1:] - c[:-1]) > ALBEDO_TOLERANCE)
     marked = ndimage.maximum_filter(changed, size=2 * reach + 3, mode="constant")
-    return marked[y, x]
+    return marked.ravel() if in_order else marked[y, x]
 
 
 #: Where the padding of a set of pixels is traced: far enough outside the
