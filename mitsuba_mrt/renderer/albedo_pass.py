@@ -8,9 +8,12 @@ texture, a rough BSDF whose sampled weight varies) do the samples average
 to something else.  So every pixel is traced with one sample first, and the
 pixels near a change (of the surface seen at the pixels' centres, or of
 those single-sample albedos) again with :data:`ALBEDO_SAMPLES`, the count of
-a one-step pass, through the film's filter.  The first step develops its
-samples with a box filter (each in its own pixel): where the albedo is one,
-a filter changes nothing, and where it is not, the second step replaces it.
+a one-step pass, through the film's filter.  Where every shape's albedo is
+one colour (:func:`~.scene_query.shape_albedos`) the first step is not
+traced: a sample gives the albedo of the shape, and side, it sees.  The
+first step develops its samples with a box filter (each in its own pixel):
+where the albedo is one, a filter changes nothing, and where it is not, the
+second step replaces it.
 Through a box filter the second step sums each pixel's own samples; through
 a wider one it splats them over an image-sized block, as ``mi.render`` does.
 """
@@ -43,7 +46,8 @@ SECOND_SEED = 0x9E3779B9
 
 
 def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int,
-                replay: bool, box: bool, surface: tuple | None) -> _Developed:
+                replay: bool, box: bool, surface: tuple | None,
+                centre: np.ndarray | None = None) -> _Developed:
     """The albedo of ``pixel_xy``, traced without the nested integrator.
 
     ``develop`` is :func:`~.develop._develop_jit` or its scalar twin;
@@ -52,7 +56,9 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
     centres see, (shape index, mirror path) per pixel, or None; with it, and
     when ``pixel_xy`` is every pixel of the image, the pass takes two steps
     (see the module), else one; with it the samples' normal is not developed
-    (zero: the trace takes the centres').
+    (zero: the trace takes the centres').  ``centre`` (n, 3), where every
+    surface's albedo is one colour (:func:`~.scene_query.shape_albedos`), is
+    the albedo of the surface each centre sees: the first step's, untraced.
     """
     count = min(sampler.sample_count(), ALBEDO_SAMPLES)
     width, height = (int(v) for v in sensor.film().crop_size())
@@ -62,12 +68,19 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
         sampler.set_sample_count(count)
         return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box,
                        normals=normals)
-    sampler.set_sample_count(1)
-    # each sample in its own pixel: where the albedo is one, the filter changes nothing
-    first = develop(scene, sensor, None, sampler, pixel_xy, 1, seed, True, replay, True,
-                    normals=False)
+    if centre is not None:  # what one sample would give, where it sees the centre's surface
+        n = len(pixel_xy)
+        first = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)),
+                           np.array(centre, dtype=np.float64), np.zeros((n, 3)))
+    else:
+        sampler.set_sample_count(1)
+        # each sample in its own pixel: where the albedo is one, the filter changes nothing
+        first = develop(scene, sensor, None, sampler, pixel_xy, 1, seed, True, replay, True,
+                        normals=False)
     reach = _reach(None if box else sensor.film().rfilter())
-    again = varied_pixels(pixel_xy, width, height, first.albedo, surface, reach)
+    # (the centres' albedo follows their surface: it tells no change of its own)
+    again = varied_pixels(pixel_xy, width, height, None if centre is not None else first.albedo,
+                          surface, reach)
     if again.any():
         sampler.set_sample_count(count)
         second = _second_step(develop, scene, sensor, sampler, pixel_xy[again], reach, count,
@@ -84,12 +97,12 @@ def _reach(rfilter) -> int:
     return max(0, math.ceil(float(filter_table(rfilter).radius) - 0.5))
 
 
-def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndarray,
+def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndarray | None,
                   surface: tuple, reach: int) -> np.ndarray:
     """(n,) bool: pixels near which the surface seen or the albedo changes.
 
     Two neighbouring pixels differ where one of the ``surface`` keys (arrays
-    per pixel) differs, or an albedo channel by more than
+    per pixel) differs, or an ``albedo`` channel (if given) by more than
     :data:`ALBEDO_TOLERANCE`; both, and every pixel within ``reach + 1`` of
     either, are marked: their samples (which reach ``reach`` pixels away)
     may see more than one albedo.
@@ -123,7 +136,7 @@ def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndar
     for key in surface:
         image = image_of(np.asarray(key))
         mark(image[:, 1:] != image[:, :-1], image[1:] != image[:-1])
-    image = image_of(np.asarray(albedo))
+    image = image_of(np.asarray(albedo)) if albedo is not None else np.zeros((0, 0, 0))
     for channel in range(image.shape[-1]):
         c = image[..., channel]
         mark(np.abs(c[:, 1:] - c[:, :-1]) > ALBEDO_TOLERANCE,

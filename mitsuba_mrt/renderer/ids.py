@@ -165,7 +165,9 @@ def _with_side(path: np.ndarray, back: np.ndarray) -> np.ndarray:
 
 
 def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
-    """Shape, visible lights, mirror chain and side of every pixel's centre ray."""
+    """Shape index, visible-light mask, path id (the shape, its mirror chain
+    and side), shading normal and whether the surface is seen from its back,
+    of every pixel's centre ray."""
     n = len(pixel_xy)
     layout = (rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
     mask, pointers, inner, chain, normal, back = _IDS(
@@ -186,8 +188,9 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
              for bounced, ptr in chain]
     path = _with_inner_shapes(_path_ids(shape_index, steps, len(keys)),
                               _to_numpy(inner, n).astype(np.int64), scene)
-    path = _with_side(path, _to_numpy(back, n).astype(bool))
-    return shape_index, _to_numpy(mask, n).astype(np.uint32), path, _to_numpy(normal, n)
+    back = _to_numpy(back, n).astype(bool)
+    path = _with_side(path, back)
+    return shape_index, _to_numpy(mask, n).astype(np.uint32), path, _to_numpy(normal, n), back
 
 
 def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
@@ -231,7 +234,7 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
                 steps[b][k] = lookup.get(id(shape), 0) if shape is not None else len(lookup) + 1
     path = _with_side(_with_inner_shapes(_path_ids(shape_index, steps, len(lookup)), inner,
                                          scene), back)
-    return shape_index, visible, path, normal
+    return shape_index, visible, path, normal, back
 
 
 #: The id kernel, replayed from a recording when the same trace repeats.

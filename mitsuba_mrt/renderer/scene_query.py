@@ -231,6 +231,40 @@ def albedo_per_shape(scene: mi.Scene) -> bool:
     return all(shows(scene, lambda shape: one_colour(shape.bsdf()), all))
 
 
+def shape_albedos(scene: mi.Scene) -> np.ndarray | None:
+    """Per shape index (1-based, as in :func:`ordered_shapes`; row 0 for no
+    shape) and side (0: the front, 1: the back), the albedo every sample of
+    the shape's BSDF gives, (shapes + 1, 2, 3); None unless
+    :func:`albedo_per_shape` holds and no shape is an ``instance`` (whose
+    group may hold several colours).
+
+    A smooth ``diffuse`` BSDF's sample weight is its reflectance (clipped to
+    [0, 1], as the trace clips it) from the front and zero from the back; a
+    ``twosided`` one gives its second BSDF's (or its only one's) from the back.
+    """
+    if not albedo_per_shape(scene):
+        return None
+    shapes = ordered_shapes(scene)
+    if any(shape.class_name() == "Instance" for shape in shapes):
+        return None
+    table = np.zeros((len(shapes) + 1, 2, 3))
+
+    def colour(params, key) -> np.ndarray:
+        value = np.asarray(params[key], dtype=np.float32).ravel()
+        return np.clip(np.broadcast_to(value, (3,)), 0.0, 1.0)
+
+    for k, shape in enumerate(shapes, 1):
+        params = mi.traverse(shape.bsdf())
+        if "reflectance.value" in params:  # one-sided: black from the back
+            table[k, 0] = colour(params, "reflectance.value")
+        else:
+            table[k, 0] = colour(params, "brdf_0.reflectance.value")
+            table[k, 1] = colour(params, "brdf_1.reflectance.value"
+                                 if "brdf_1.reflectance.value" in params
+                                 else "brdf_0.reflectance.value")
+    return table
+
+
 def textured_diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     """:func:`diffuse_shapes`, only those whose reflectance is not one
     colour (a bitmap, a procedural texture, ...): those whose radiance a

@@ -24,7 +24,7 @@ from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
 from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices, replayable,
-                          set_sample_count, shadow_rule, tracked_lights)
+                          set_sample_count, shadow_rule, shape_albedos, tracked_lights)
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.  Dark
@@ -115,11 +115,13 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                            aovs and albedo, replay, box, halves, ids, one_colour)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
-        shape_index, visible, path_id, normal = (_ids_jit if is_jit() else _ids_scalar)(
+        shape_index, visible, path_id, normal, back = (_ids_jit if is_jit() else _ids_scalar)(
             scene, sensor, sampler, pixel_xy, lights, _shape_lookup(scene), rule, replay)
     if aovs and not radiance and albedo:  # the id pass: albedo alone
+        table = shape_albedos(scene) if ids and one_colour else None
         samples = albedo_pass(develop, scene, sensor, sampler, pixel_xy, seed, replay, box,
-                              (shape_index, path_id) if ids else None)
+                              (shape_index, path_id) if ids else None,
+                              None if table is None else table[shape_index, back.astype(np.int64)])
     elif aovs and not radiance:  # the ids alone
         samples = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)),
                              normal)

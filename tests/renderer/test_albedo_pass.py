@@ -85,3 +85,60 @@ def test_through_a_box_filter_the_second_step_is_the_splatted_one_without_a_bloc
     assert own.albedo.shape == (len(xy), 3)
     np.testing.assert_allclose(own.albedo, splat.albedo, rtol=1e-5, atol=1e-6)
     assert 0.05 < own.albedo.mean() < 0.95
+
+
+# -- where every surface is one colour: the first step from the scene --------------------------
+
+#: Two cards seen from behind (rotated to face away from the camera): a
+#: ``twosided`` one, which shows its second BSDF there, and a one-sided one,
+#: black from behind.
+CARDS = ''.join(
+    f'<shape type="rectangle" id="card_{k}"><transform name="to_world">'
+    f'<rotate y="1" angle="180"/><translate x="{x}" y="1.5" z="1"/></transform>{bsdf}</shape>'
+    for k, (x, bsdf) in enumerate([
+        (-1.8, '<bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" '
+               'value="0.3, 0.6, 0.9"/></bsdf><bsdf type="diffuse"><rgb name="reflectance" '
+               'value="0.7, 0.4, 0.1"/></bsdf></bsdf>'),
+        (1.8, '<bsdf type="diffuse"><rgb name="reflectance" value="0.9, 0.9, 0.2"/></bsdf>')]))
+
+
+def _passes_with_and_without_the_table(scene, monkeypatch):
+    from mitsuba_mrt.renderer import trace as trace_module
+
+    marked, traces = [], []
+    real = ap.varied_pixels
+    monkeypatch.setattr(ap, "varied_pixels", lambda *a: marked.append(real(*a)) or marked[-1])
+    traces.append(_id_pass(scene, 16, 0))
+    monkeypatch.setattr(trace_module, "shape_albedos", lambda s: None)  # the step traced
+    traces.append(_id_pass(scene, 16, 0))
+    return traces, marked
+
+
+def test_one_colour_surfaces_give_the_first_step_without_tracing_it(variant, monkeypatch):
+    from mitsuba_mrt.renderer.scene_query import shape_albedos
+
+    scene = mi.load_string(small_scene_xml(RES, extra=CARDS).replace(
+        'value="1"/><boolean name="jitter" value="false"/>', 'value="16"/>'))
+    table = shape_albedos(scene)
+    assert table is not None and table.shape == (5, 2, 3)
+    (mine, traced), (again, again_traced) = _passes_with_and_without_the_table(scene, monkeypatch)
+    assert np.array_equal(mine.shape_index, traced.shape_index)
+    # away from a change of surface one sample's albedo is the table's, bit for bit
+    flat = ~again & ~again_traced & (mine.shape_index > 0)
+    assert flat.sum() > RES * RES // 2
+    assert np.array_equal(mine.albedo[flat], traced.albedo[flat])
+    seen = {tuple(np.round(a, 5)) for a in mine.albedo[flat]}
+    assert (0.7, 0.4, 0.1) in seen  # the two-sided card's back
+    card = np.round(table[3, 0], 5)  # (id order: ball, card_0, card_1, floor)
+    assert tuple(card) == (0.9, 0.9, 0.2) and tuple(card) not in seen  # one-sided: black behind
+    assert mine.albedo[flat].min() == 0.0
+
+
+@pytest.mark.parametrize("extra", [CHECKER, '<shape type="shapegroup" id="group"><shape type='
+                                   '"sphere"><bsdf type="diffuse"/></shape></shape><shape type='
+                                   '"instance"><ref id="group"/></shape>'],
+                         ids=["a texture", "an instance"])
+def test_the_table_is_only_for_shapes_of_one_colour_each(variant, extra):
+    from mitsuba_mrt.renderer.scene_query import shape_albedos
+
+    assert shape_albedos(mi.load_string(small_scene_xml(RES, extra=extra))) is None
