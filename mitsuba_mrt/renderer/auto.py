@@ -8,7 +8,9 @@ on until the estimated error meets ``noise_threshold`` (default: the full
 render's own noise at the scene's spp, or half the scene's spp, where one
 more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
-full render, which is exact), a time limit leaves too little for OIDN on
+full render, which is exact), the scene is of the report's kind (every
+surface diffuse, every light a point: then :data:`HOME`, mode ``idpass``
+with its grid denoised), a time limit leaves too little for OIDN on
 the whole image after one pass (judged before any pass: from the first
 round of an earlier time-limited render of the scene in the process, else
 from the preview's own grid, traced first; then a *preview*: mode ``fast``
@@ -39,7 +41,7 @@ from ..types import MRTParams, SeedStream, SparseTrace
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
 from .replay import recordings
-from .scene_query import textured_diffuse_shapes
+from .scene_query import lit_diffuse_by_points, textured_diffuse_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -72,6 +74,18 @@ PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the 
 #: taken instead: the preview's error is several times a pass's, and a limit
 #: is held to within 10 %.
 PREVIEW_SLACK = 1.1
+
+#: The plan, under the default target, where every surface is diffuse and
+#: every light a point, spot or directional one
+#: (:func:`~.scene_query.lit_diffuse_by_points`, the report's own scenes):
+#: mode ``idpass`` at the scene's spp, OIDN on its grid.  There its ids hold
+#: every edge of shape and shadow and its error meets a full render's noise
+#: for less than the denoised passes take (``bench rival``'s Fig. 1 row).
+HOME = Candidate("idpass+oidn", "mrt", 0, mode="idpass", denoise=True)
+HOME_REASON = "diffuse surfaces lit by point lights alone: the MRT's id pass, denoised grid"
+#: The fewest spp for :data:`HOME`: below them the id pass costs too large a
+#: share of the render, and the passes' few rounds cost little.
+HOME_MIN_SPP = 16
 
 #: A pass of every pixel (1 spp, box filter, guides) over the preview's grid
 #: trace's kernel time scaled to as many pixels (that trace also follows
@@ -136,6 +150,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             tracer, width, height):
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
+                                pilot_s=time.perf_counter() - probe_start, notes=notes))
+    if (escape and denoise and limit is None and params.noise_threshold is None
+            and spp >= HOME_MIN_SPP and lit_diffuse_by_points(scene)):
+        return AutoOutcome(Plan(replace(HOME, spp=spp), HOME_REASON,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit

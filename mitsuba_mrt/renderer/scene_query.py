@@ -207,6 +207,18 @@ def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     return np.array([False] + shows(scene, lambda shape: diffuse(shape.bsdf()), all), dtype=bool)
 
 
+def lit_diffuse_by_points(scene: mi.Scene) -> bool:
+    """Whether every surface of ``scene`` is diffuse (:func:`diffuse_shapes`)
+    and every emitter a point, spot or directional light: the report's
+    scenes, where shading is smooth within a shape and every edge of light
+    is a shadow the ids track."""
+    delta = (mi.EmitterFlags.DeltaPosition, mi.EmitterFlags.DeltaDirection)
+    emitters = scene.emitters()
+    return (len(emitters) > 0 and len(scene.shapes()) > 0
+            and all(any(mi.has_flag(e.flags(), f) for f in delta) for e in emitters)
+            and bool(diffuse_shapes(scene)[1:].all()))
+
+
 #: The parameters of a BSDF whose albedo is one colour: a smooth diffuse
 #: BSDF's constant reflectance, or that of the one inside a ``twosided``.
 _ONE_COLOUR = re.compile(r"(brdf_\d+\.)?reflectance\.value")

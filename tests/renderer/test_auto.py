@@ -169,6 +169,40 @@ def test_a_noise_free_scene_is_rendered_in_full(variant):
     assert np.array_equal(result.image, mitsuba_mrt.render_reference(scene)[0])
 
 
+AREA_LIGHT = """<shape type="sphere"><point name="center" x="2" y="3" z="4"/><float name="radius" value="0.5"/>
+    <emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>"""
+POINT_LIGHT = """<emitter type="point"><point name="position" x="2" y="3" z="4"/>
+    <rgb name="intensity" value="40"/></emitter>"""
+
+
+def test_diffuse_surfaces_under_point_lights_take_the_id_pass(variant):
+    # the report's kind of scene: the MRT's id pass, its grid denoised, meets a
+    # full render's noise (the default target) without the passes
+    assert AREA_LIGHT in scene_xml(384)
+    scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    result = mitsuba_mrt.render(scene)
+    assert result.mode_used == "idpass" and result.params.denoise == "oidn"
+    assert result.auto.choice.label == "idpass+oidn @ 16 spp"
+    assert result.auto.reason == auto.HOME_REASON and not result.auto.passes
+    truth = mitsuba_mrt.render_reference(scene, spp=256)[0]
+    full = mitsuba_mrt.render_reference(scene)[0]
+    assert np.mean((result.image - truth) ** 2) < np.mean((full - truth) ** 2)
+
+
+def test_the_id_pass_plan_is_not_taken_under_a_limit_a_threshold_or_an_area_light(variant):
+    from mitsuba_mrt.renderer.scene_query import lit_diffuse_by_points
+
+    point_lit = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    assert lit_diffuse_by_points(point_lit)
+    assert not lit_diffuse_by_points(mi.load_string(scene_xml(384, spp=16)))
+    glossy = scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT).replace(
+        '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf>',
+        '<bsdf type="roughplastic"/>')
+    assert not lit_diffuse_by_points(mi.load_string(glossy))
+    for kwargs in ({"time_limit": 1e-6}, {"noise_threshold": 0.5}):
+        assert mitsuba_mrt.render(point_lit, **kwargs).auto.reason != auto.HOME_REASON
+
+
 def test_the_noise_probe_tells_a_noisy_scene(scene):
     from mitsuba_mrt.renderer.api import GridTracer
     from mitsuba_mrt.renderer.auto import noise_free
