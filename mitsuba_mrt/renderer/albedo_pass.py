@@ -136,11 +136,12 @@ def varied_pixels(pixel_xy: np.ndarray, width: int, height: int, albedo: np.ndar
     for key in surface:
         image = image_of(np.asarray(key))
         mark(image[:, 1:] != image[:, :-1], image[1:] != image[:-1])
-    image = image_of(np.asarray(albedo)) if albedo is not None else np.zeros((0, 0, 0))
-    for channel in range(image.shape[-1]):
-        c = image[..., channel]
-        mark(np.abs(c[:, 1:] - c[:, :-1]) > ALBEDO_TOLERANCE,
-             np.abs(c[1:] - c[:-1]) > ALBEDO_TOLERANCE)
+    if albedo is not None:
+        image = image_of(np.asarray(albedo))
+        for channel in range(image.shape[-1]):
+            c = image[..., channel]
+            mark(np.abs(c[:, 1:] - c[:, :-1]) > ALBEDO_TOLERANCE,
+                 np.abs(c[1:] - c[:-1]) > ALBEDO_TOLERANCE)
     marked = ndimage.maximum_filter(changed, size=2 * reach + 3, mode="constant")
     return marked.ravel() if in_order else marked[y, x]
 
