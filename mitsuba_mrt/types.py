@@ -359,6 +359,8 @@ class SeedStream(enum.IntEnum):
     #: ``auto``'s pilot: its two reference halves, then its 1-spp traces
     #: (``LADDER + k`` for the k-th)
     REFERENCE = 6
+    #: ``auto``'s check of an MRT image (:mod:`mitsuba_mrt.renderer.held_out`)
+    CHECK = 7
     LADDER = 16
 
 

@@ -42,3 +42,25 @@ def small_scene_xml(res: int = 32, integrator: str = '<integrator type="matte"/>
   </sensor>{body}
   {extra}
 </scene>"""
+
+
+def ball_scene_xml(res: int, spp: int = 8, rfilter: str = "box",
+                   sampler: str = "independent", max_depth: int = 4) -> str:
+    """A diffuse ball on a plane under an area light, path traced: noisy, as real scenes are."""
+    return f"""<scene version="3.0.0">
+  <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, 0, 8" target="0, 0, 0" up="0, 1, 0"/></transform>
+    <sampler type="{sampler}"><integer name="sample_count" value="{spp}"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/>
+      <rfilter type="{rfilter}"/></film>
+  </sensor>
+  <shape type="sphere"><float name="radius" value="1"/>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf></shape>
+  <shape type="rectangle">
+    <transform name="to_world"><scale value="20"/><translate z="-1.5"/></transform>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf></shape>
+  <shape type="sphere"><point name="center" x="2" y="3" z="4"/><float name="radius" value="0.5"/>
+    <emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>
+</scene>"""

@@ -1,0 +1,83 @@
+"""``auto``'s check of an MRT image: pixels it did not trace, traced now.
+
+A share of the pixels the MRT reconstructed (:func:`held_out_pixels`) is
+traced twice, each time at half the scene's spp with other random numbers,
+in one launch.  The two traces are independent of the image and of each
+other: the mean squared difference between the image and their mean, less
+that mean's noise (a quarter of the two traces' mean squared difference),
+estimates the image's squared error there without a reference, whatever the
+sampler's stratification; that noise over the pixel filter's effective area
+is a full render's, the default target (for a stratifying sampler, whose
+noise falls faster than the spp rise, a little more than a full render's).
+Every value is clipped to what a display shows, [0, 1], first, so that a
+rare bright sample does not swamp what the other pixels say.  Both are
+relative RMS errors over the pixels a display shows unclipped
+(:func:`~mitsuba_mrt.recon.metrics.relative_error`), as ``auto``'s other
+estimates (:mod:`.pilot`, :mod:`.progressive`) are.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..recon.metrics import relative_error
+from ..types import SeedStream
+
+#: The share of the image's pixels the check traces, and the fewest it
+#: traces: enough that the estimate's own scatter is small beside the margin
+#: it decides (a thousand pixels and more), few enough that it costs about a
+#: hundredth of a full render.
+CHECK_SHARE, CHECK_MIN = 1 / 128, 1024
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """What the check found: the image's estimated error at the held-out
+    pixels, a full render's there, how many pixels it traced and its seconds."""
+
+    error: float
+    full_error: float
+    pixels: int
+    seconds: float
+
+
+def held_out_pixels(traced: np.ndarray, share: float = CHECK_SHARE,
+                    minimum: int = CHECK_MIN) -> np.ndarray:
+    """Flat indices of pixels not ``traced`` (a (height, width) mask), spread
+    evenly over them in row-major order: ``share`` of all pixels, at least
+    ``minimum``, at most every untraced one.
+
+    Examples
+    --------
+    >>> traced = np.zeros((4, 4), bool); traced[::2, ::2] = True
+    >>> held_out_pixels(traced, share=0.25, minimum=2).tolist()
+    [1, 5, 9, 13]
+    """
+    untraced = np.flatnonzero(~traced.ravel())
+    count = min(len(untraced), max(minimum, int(round(share * traced.size))))
+    if count == 0:
+        return untraced
+    return untraced[(np.arange(count) * len(untraced)) // count]
+
+
+def check_image(image: np.ndarray, traced: np.ndarray, tracer, area: float) -> HeldOut:
+    """Trace :func:`held_out_pixels` of ``image`` (height, width, 3; its
+    ``traced`` mask) twice with ``tracer`` at half its spp and estimate the
+    image's error and a full render's (pixel filter of effective ``area``)
+    there (see the module)."""
+    begin = time.perf_counter()
+    width = image.shape[1]
+    index = held_out_pixels(traced)
+    xy = np.stack([index % width, index // width], axis=1)
+    # each pixel twice in one launch: a sampler draws other numbers for each lane
+    trace = replace(tracer, spp=max(tracer.spp // 2, 1))(
+        np.concatenate([xy, xy]), stream=SeedStream.CHECK, aovs=False)
+    first, second = np.split(np.clip(trace.radiance, 0.0, 1.0), 2)
+    mine = np.clip(image.reshape(-1, 3)[index], 0.0, 1.0)
+    noise = (first - second) ** 2 / 4  # of their mean, in expectation
+    squared = (mine - (first + second) / 2) ** 2 - noise
+    return HeldOut(relative_error(squared, mine), relative_error(noise / area, mine),
+                   len(index), time.perf_counter() - begin)

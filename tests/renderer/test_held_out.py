@@ -1,0 +1,44 @@
+"""``auto``'s held-out check of an MRT image, against images of known error."""
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import mitsuba_mrt
+from mitsuba_mrt.renderer.api import GridTracer
+from mitsuba_mrt.renderer.held_out import check_image, held_out_pixels
+from mitsuba_mrt.renderer.pilot import effective_area
+
+from helpers import ball_scene_xml
+
+
+@pytest.mark.parametrize("sampler", ["independent", "stratified"])
+def test_the_check_tells_a_full_render_from_a_worse_and_a_better_image(variant, sampler):
+    scene = mi.load_string(ball_scene_xml(96, spp=16, sampler=sampler, max_depth=3))
+    sensor = scene.sensors()[0]
+    tracer = GridTracer(scene, sensor, scene.integrator(), 16, 0)
+    area = effective_area(sensor.film().rfilter())
+    none = np.zeros((96, 96), bool)  # every pixel the image's own guess
+    truth = mitsuba_mrt.render_reference(scene, spp=1024)[0]
+    full = mitsuba_mrt.render_reference(scene, seed=7)[0]
+    worse = mitsuba_mrt.render_reference(scene, spp=4, seed=7)[0]
+    at = {name: check_image(image, none, tracer, area)
+          for name, image in (("truth", truth), ("full", full), ("worse", worse))}
+    for held in at.values():
+        assert held.pixels == 1024 and held.full_error > 0
+    # a full render's error is its noise: about what the check expects of one
+    assert 0.6 < at["full"].error / at["full"].full_error < 1.6
+    assert at["worse"].error > 1.5 * at["full"].error  # twice the noise
+    assert at["truth"].error < 0.5 * at["full"].error
+
+
+def test_the_held_out_pixels_are_untraced_and_spread():
+    traced = np.zeros((64, 64), bool)
+    traced[::3, ::3] = True
+    index = held_out_pixels(traced, share=1 / 16, minimum=10)
+    assert len(index) == 256 and len(np.unique(index)) == 256
+    assert not traced.ravel()[index].any()
+    rows = index // 64
+    assert rows.min() < 4 and rows.max() > 59
+    assert len(held_out_pixels(np.ones((8, 8), bool))) == 0
+    assert len(held_out_pixels(np.zeros((8, 8), bool))) == 64
