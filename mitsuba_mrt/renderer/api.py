@@ -29,7 +29,9 @@ from ..runtime.jit import counting_kernels
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
                      TracedCounts, check_radiance)
 from . import auto
+from .held_out import check_image
 from .lanes import is_jit
+from .pilot import effective_area
 from .pipeline import mrt_image
 from .scene import resolve_sensor, unwrap
 from .trace import trace_pixels
@@ -165,13 +167,13 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
-    plan, pattern, grid = None, None, None
+    plan, pattern, grid, check = None, None, None, False
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
             pattern = grid_pattern(width, height, params.sample_fraction)
             outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
-            plan, grid = outcome.plan, outcome.grid
+            plan, grid, check = outcome.plan, outcome.grid, outcome.check
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
         choice = plan.choice
@@ -184,12 +186,44 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
                                     on_round=progress)
             outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
             return _passes_result(outcome, tracer, params, start)
+        if check:  # an MRT image chosen without a pilot: kept if its check says so
+            result = _mrt(pattern, replace(tracer, spp=choice.spp),
+                          params.with_(denoise="oidn" if choice.denoise else "none"),
+                          choice.mode, plan, start, progress or _quiet, grid)
+            return _checked(result, scene, pattern, tracer, params, start, progress)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
         tracer = replace(tracer, spp=choice.spp)
     if pattern is None:  # (a plan's pilot has made it already)
         pattern = grid_pattern(width, height, params.sample_fraction)
     return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
+
+
+def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
+             params: MRTParams, start: float, progress) -> MRTResult:
+    """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
+    check keeps it (:func:`.auto.keeps`); else ``auto``'s denoised passes,
+    the MRT's seconds and the check's counted as ``check``."""
+    held = check_image(result.image, result.traced_mask, tracer,
+                       effective_area(tracer.sensor.film().rfilter()))
+    plan = result.auto
+    plan.choice = replace(plan.choice, error=held.error)
+    plan.target_error, plan.pilot_pixels = held.full_error, 2 * held.pixels
+    plan.pilot_s += held.seconds
+    if auto.keeps(held):
+        result.timings.check += held.seconds
+        result.timings.close(time.perf_counter() - start)
+        return result
+    outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
+                            on_round=progress)
+    outcome.plan.reason = (f"{plan.choice.name} missed its check ({held.error:.4f} against "
+                           f"a full render's {held.full_error:.4f}): {outcome.plan.reason}")
+    outcome.plan.candidates = [plan.choice]
+    outcome.plan.pilot_s += result.timings.total + held.seconds
+    passes = _passes_result(outcome, tracer, params, start)
+    passes.timings.check += result.timings.total + held.seconds
+    passes.timings.close(passes.timings.total)
+    return passes
 
 
 def _quiet(stage: str, done: float) -> None:

@@ -9,8 +9,10 @@ render's own noise at the scene's spp, or half the scene's spp, where one
 more round would cost a full render), unless the scene
 is noise-free (:func:`noise_free`, a probe before the passes: then the
 full render, which is exact), the scene is of the report's kind (every
-surface diffuse, every light a point: then :data:`HOME`, mode ``idpass``
-with its grid denoised), a time limit leaves too little for OIDN on
+surface diffuse, every light a point) or the image large and lit by no
+environment map (then :data:`HOME`, mode ``idpass`` with its grid
+denoised, kept where its held-out check (:mod:`.held_out`, :func:`keeps`)
+finds it near a full render's quality, else the passes after it), a time limit leaves too little for OIDN on
 the whole image after one pass (judged before any pass: from the first
 round of an earlier time-limited render of the scene in the process, else
 from the preview's own grid, traced first; then a *preview*: mode ``fast``
@@ -38,10 +40,11 @@ from ..recon.denoise import expected_seconds, oidn_available, preset
 from ..recon.sampling import SamplePattern
 from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
+from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
 from .replay import recordings
-from .scene_query import lit_diffuse_by_points, textured_diffuse_shapes
+from .scene_query import environment_map, lit_diffuse_by_points, textured_diffuse_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -86,6 +89,22 @@ HOME_REASON = "diffuse surfaces lit by point lights alone: the MRT's id pass, de
 #: The fewest spp for :data:`HOME`: below them the id pass costs too large a
 #: share of the render, and the passes' few rounds cost little.
 HOME_MIN_SPP = 16
+#: :data:`HOME` on other scenes, under the same conditions: images of at least
+#: this many pixels (512 x 512) lit by no environment map
+#: (:func:`~.scene_query.environment_map`).  There the grid resolves the
+#: shading the ids do not hold, and the id pass's albedo the textures that
+#: OIDN blurs; on smaller images the grid's spacing is coarse beside the
+#: scene's detail (``bench rival`` at 256 px: ``idpass+oidn`` behind the
+#: alternative on five of nine gallery scenes).
+WIDE_PIXELS = 1 << 18
+WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, denoised grid"
+#: :data:`HOME`'s image is kept where its held-out check estimates its RMS
+#: error at most this many times a full render's noise (the default target);
+#: else the passes render the image.  The RMS error weighs the MRT's few
+#: pixels at edges more than the report's mean absolute error does: on the
+#: bench's scenes where that image meets the target by the report's metric,
+#: the check's estimate is 0.5-1.3 times the noise.
+CHECK_SLACK = 1.5
 
 #: A pass of every pixel (1 spp, box filter, guides) over the preview's grid
 #: trace's kernel time scaled to as many pixels (that trace also follows
@@ -102,13 +121,28 @@ _first_round_s: dict = {}
 @dataclass
 class AutoOutcome:
     """``auto``'s plan, and the image when the passes made it (``grid``: the
-    preview's grid, where tracing it told the plan)."""
+    preview's grid, where tracing it told the plan; ``check``: the plan's
+    MRT image is to be checked, :func:`keeps`)."""
 
     plan: Plan
     image: np.ndarray | None = None
     alpha: np.ndarray | None = None
     progress: Progress | None = None
     grid: SparseTrace | None = None
+    check: bool = False
+
+
+def keeps(held: HeldOut) -> bool:
+    """Whether a :data:`HOME` image whose check found ``held`` is kept.
+
+    Examples
+    --------
+    >>> keeps(HeldOut(error=0.012, full_error=0.01, pixels=2048, seconds=0.01))
+    True
+    >>> keeps(HeldOut(error=0.02, full_error=0.01, pixels=2048, seconds=0.01))
+    False
+    """
+    return held.error <= CHECK_SLACK * held.full_error
 
 
 def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
@@ -151,10 +185,14 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
-    if (escape and denoise and limit is None and params.noise_threshold is None
-            and spp >= HOME_MIN_SPP and lit_diffuse_by_points(scene)):
-        return AutoOutcome(Plan(replace(HOME, spp=spp), HOME_REASON,
-                                pilot_s=time.perf_counter() - probe_start, notes=notes))
+    if escape and denoise and limit is None and params.noise_threshold is None \
+            and spp >= HOME_MIN_SPP:
+        reason = (HOME_REASON if lit_diffuse_by_points(scene) else WIDE_REASON
+                  if width * height >= WIDE_PIXELS and not environment_map(scene) else None)
+        if reason is not None:
+            return AutoOutcome(Plan(replace(HOME, spp=spp), reason,
+                                    pilot_s=time.perf_counter() - probe_start, notes=notes),
+                               check=True)
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)

@@ -219,6 +219,14 @@ def lit_diffuse_by_points(scene: mi.Scene) -> bool:
             and bool(diffuse_shapes(scene)[1:].all()))
 
 
+def environment_map(scene: mi.Scene) -> bool:
+    """Whether an environment emitter of ``scene`` varies with direction (an
+    ``envmap``, not a ``constant``): its detail, seen or reflected, lies
+    inside one region of ids, between the MRT's grid pixels."""
+    return any(e.is_environment() and "radiance.value" not in mi.traverse(e).keys()
+               for e in scene.emitters())
+
+
 #: The parameters of a BSDF whose albedo is one colour: a smooth diffuse
 #: BSDF's constant reflectance, or that of the one inside a ``twosided``.
 _ONE_COLOUR = re.compile(r"(brdf_\d+\.)?reflectance\.value")

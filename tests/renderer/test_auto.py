@@ -16,6 +16,8 @@ from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
 from mitsuba_mrt.renderer import auto, pilot
 
+from helpers import ball_scene_xml as scene_xml
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -34,25 +36,6 @@ def test_by_default_the_passes_stop_at_half_the_scenes_spp(variant, monkeypatch)
     assert result.auto.choice.error == 1.0
 
 
-def scene_xml(res: int, spp: int = 8, rfilter: str = "box") -> str:
-    """A diffuse ball on a plane under an area light, path traced: noisy, as real scenes are."""
-    return f"""<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="4"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, 0, 8" target="0, 0, 0" up="0, 1, 0"/></transform>
-    <sampler type="independent"><integer name="sample_count" value="{spp}"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/>
-      <rfilter type="{rfilter}"/></film>
-  </sensor>
-  <shape type="sphere"><float name="radius" value="1"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf></shape>
-  <shape type="rectangle">
-    <transform name="to_world"><scale value="20"/><translate z="-1.5"/></transform>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf></shape>
-  <shape type="sphere"><point name="center" x="2" y="3" z="4"/><float name="radius" value="0.5"/>
-    <emitter type="area"><rgb name="radiance" value="8"/></emitter></shape>
-</scene>"""
 
 
 # -- the planner, on synthetic costs and errors ------------------------------------------------
@@ -201,6 +184,47 @@ def test_the_id_pass_plan_is_not_taken_under_a_limit_a_threshold_or_an_area_ligh
     assert not lit_diffuse_by_points(mi.load_string(glossy))
     for kwargs in ({"time_limit": 1e-6}, {"noise_threshold": 0.5}):
         assert mitsuba_mrt.render(point_lit, **kwargs).auto.reason != auto.HOME_REASON
+
+
+def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(variant):
+    # an area light, diffuse surfaces, 512 x 512: the id pass, its grid denoised,
+    # kept because its held-out check finds it near a full render's noise
+    result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
+    plan = result.auto
+    assert result.mode_used == "idpass" and result.params.denoise == "oidn"
+    assert plan.reason == auto.WIDE_REASON and not plan.passes
+    assert plan.pilot_pixels >= 2 * 1024 and plan.target_error > 0
+    assert plan.choice.error <= auto.CHECK_SLACK * plan.target_error
+    assert result.timings.check >= plan.pilot_s - 1e-9 > 0
+
+
+def test_an_id_pass_image_that_misses_its_check_gives_way_to_the_passes(variant, monkeypatch):
+    monkeypatch.setattr(auto, "CHECK_SLACK", -1.0)  # no estimate is kept
+    result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
+    plan = result.auto
+    assert result.mode_used == "full+oidn" and plan.passes
+    assert plan.reason.startswith("idpass+oidn missed its check (")
+    assert [c.name for c in plan.candidates] == ["idpass+oidn"]
+    assert plan.candidates[0].error is not None and np.isfinite(result.image).all()
+    # the MRT's image and its check are counted as the plan's, within the total
+    assert result.timings.trace + result.timings.check <= result.timings.total + 1e-9
+
+
+def test_the_checked_id_pass_is_not_taken_small_or_under_an_environment_map(variant):
+    from mitsuba_mrt.renderer.scene_query import environment_map
+
+    sky = ROOT / "scenes_xml" / "gallery" / "envmaps" / "sky.exr"
+    lit = scene_xml(512, spp=16).replace(
+        "</sensor>", f'</sensor><emitter type="envmap"><string name="filename" value="{sky}"/>'
+                     '</emitter>')
+    constant = scene_xml(512, spp=16).replace(
+        "</sensor>", '</sensor><emitter type="constant"/>')
+    assert environment_map(mi.load_string(lit))
+    assert not environment_map(mi.load_string(constant))
+    assert not environment_map(mi.load_string(scene_xml(512, spp=16)))
+    assert mitsuba_mrt.render(mi.load_string(lit)).auto.reason != auto.WIDE_REASON
+    assert mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64))).auto.reason \
+        != auto.WIDE_REASON
 
 
 def test_the_noise_probe_tells_a_noisy_scene(scene):
@@ -392,7 +416,7 @@ def test_the_json_lists_the_plan(tmp_path, variant):
 def test_a_samplers_rounding_of_the_passes_spp_is_not_warned_of(tmp_path, variant):
     # stratified at 64 spp: the first round's 8 spp are 9, the probe's 2 are 4
     path = tmp_path / "ball.xml"
-    path.write_text(scene_xml(512, spp=64).replace('type="independent"', 'type="stratified"'))
+    path.write_text(scene_xml(256, spp=64).replace('type="independent"', 'type="stratified"'))
     proc = run_cli("render", path, "-o", tmp_path / "out", "--no-reference", "--no-progress")
     assert proc.returncode == 0 and "full+oidn" in proc.stdout
     assert "WARN" not in proc.stderr + proc.stdout
