@@ -74,7 +74,7 @@ def check_image(image: np.ndarray, traced: np.ndarray, tracer, area: float) -> H
     xy = np.stack([index % width, index // width], axis=1)
     # each pixel twice in one launch: a sampler draws other numbers for each lane
     trace = replace(tracer, spp=max(tracer.spp // 2, 1))(
-        np.concatenate([xy, xy]), stream=SeedStream.CHECK, aovs=False)
+        np.concatenate([xy, xy]), stream=SeedStream.CHECK, aovs=False, replay=True)
     first, second = np.split(np.clip(trace.radiance, 0.0, 1.0), 2)
     mine = np.clip(image.reshape(-1, 3)[index], 0.0, 1.0)
     noise = (first - second) ** 2 / 4  # of their mean, in expectation
