@@ -11,8 +11,10 @@ is noise-free (:func:`noise_free`, a probe before the passes: then the
 full render, which is exact), the scene is of the report's kind (every
 surface diffuse, every light a point) or the image large and lit by no
 environment map (then :data:`HOME`, mode ``idpass`` with its grid
-denoised, kept where its held-out check (:mod:`.held_out`, :func:`keeps`)
-finds it near a full render's quality, else the passes after it), a time limit leaves too little for OIDN on
+denoised), or the scene is lit by an environment map (then :data:`SKY`,
+mode ``refine`` with its grid denoised) (each MRT image kept where its
+held-out check (:mod:`.held_out`, :func:`keeps`) finds it near a full
+render's quality, else the passes after it), a time limit leaves too little for OIDN on
 the whole image after one pass (judged before any pass: from the first
 round of an earlier time-limited render of the scene in the process, else
 from the preview's own grid, traced first; then a *preview*: mode ``fast``
@@ -98,7 +100,16 @@ HOME_MIN_SPP = 16
 #: alternative on five of nine gallery scenes).
 WIDE_PIXELS = 1 << 18
 WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, denoised grid"
-#: :data:`HOME`'s image is kept where its held-out check estimates its RMS
+#: The plan, under the same conditions, where an environment map lights the
+#: scene: mode ``refine``, OIDN on its grid.  Light from every direction
+#: shades the inside of a shape slowly, which the grid holds; where it does
+#: not, at the shapes' edges and their reflections of the map, ``refine``
+#: traces the pixels (``bench rival``: 0.76-0.91x the alternative's error
+#: on the gallery's two such scenes at 256 and 512 px, where ``idpass+oidn``
+#: is 1.07-1.72x and the passes about 1.0x).
+SKY = Candidate("refine+oidn", "mrt", 0, mode="refine", denoise=True)
+SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid"
+#: :data:`HOME`'s and :data:`SKY`'s image is kept where its held-out check estimates its RMS
 #: error at most this many times a full render's noise (the default target);
 #: else the passes render the image.  The RMS error weighs the MRT's few
 #: pixels at edges more than the report's mean absolute error does: on the
@@ -133,7 +144,8 @@ class AutoOutcome:
 
 
 def keeps(held: HeldOut) -> bool:
-    """Whether a :data:`HOME` image whose check found ``held`` is kept.
+    """Whether an MRT image chosen without a pilot (:data:`HOME`, :data:`SKY`)
+    whose check found ``held`` is kept.
 
     Examples
     --------
@@ -187,10 +199,9 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     if escape and denoise and limit is None and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        reason = (HOME_REASON if lit_diffuse_by_points(scene) else WIDE_REASON
-                  if width * height >= WIDE_PIXELS and not environment_map(scene) else None)
-        if reason is not None:
-            return AutoOutcome(Plan(replace(HOME, spp=spp), reason,
+        chosen = _unmeasured(scene, width * height)
+        if chosen is not None:
+            return AutoOutcome(Plan(replace(chosen[0], spp=spp), chosen[1],
                                     pilot_s=time.perf_counter() - probe_start, notes=notes),
                                check=True)
     area = effective_area(tracer.sensor.film().rfilter())
@@ -272,6 +283,16 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     passes=list(progress.history))
         return AutoOutcome(plan, image, alpha, progress)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def _unmeasured(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | None:
+    """The MRT plan the scene's kind and ``pixels`` point to (:data:`HOME`,
+    :data:`SKY`), with its reason, or None: the passes."""
+    if lit_diffuse_by_points(scene):
+        return HOME, HOME_REASON
+    if environment_map(scene):
+        return SKY, SKY_REASON
+    return (HOME, WIDE_REASON) if pixels >= WIDE_PIXELS else None
 
 
 def _surfaces(scene, tracer, width: int, height: int) -> tuple | None:

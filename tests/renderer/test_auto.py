@@ -210,21 +210,22 @@ def test_an_id_pass_image_that_misses_its_check_gives_way_to_the_passes(variant,
     assert result.timings.trace + result.timings.check <= result.timings.total + 1e-9
 
 
-def test_the_checked_id_pass_is_not_taken_small_or_under_an_environment_map(variant):
+def test_an_environment_map_takes_the_checked_refined_edges_a_small_image_the_passes(variant):
     from mitsuba_mrt.renderer.scene_query import environment_map
 
     sky = ROOT / "scenes_xml" / "gallery" / "envmaps" / "sky.exr"
-    lit = scene_xml(512, spp=16).replace(
+    lit = scene_xml(256, spp=32).replace(
         "</sensor>", f'</sensor><emitter type="envmap"><string name="filename" value="{sky}"/>'
                      '</emitter>')
-    constant = scene_xml(512, spp=16).replace(
+    constant = scene_xml(256, spp=16).replace(
         "</sensor>", '</sensor><emitter type="constant"/>')
     assert environment_map(mi.load_string(lit))
     assert not environment_map(mi.load_string(constant))
-    assert not environment_map(mi.load_string(scene_xml(512, spp=16)))
-    assert mitsuba_mrt.render(mi.load_string(lit)).auto.reason != auto.WIDE_REASON
-    assert mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64))).auto.reason \
-        != auto.WIDE_REASON
+    assert not environment_map(mi.load_string(scene_xml(256, spp=16)))
+    result = mitsuba_mrt.render(mi.load_string(lit))
+    assert result.auto.reason == auto.SKY_REASON and result.mode_used == "refine"
+    assert result.params.denoise == "oidn" and result.auto.choice.error is not None
+    assert mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64))).auto.passes
 
 
 def test_the_noise_probe_tells_a_noisy_scene(scene):
