@@ -199,7 +199,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     if escape and denoise and limit is None and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        chosen = _unmeasured(scene, width * height)
+        chosen = unmeasured_plan(scene, width * height)
         if chosen is not None:
             return AutoOutcome(Plan(replace(chosen[0], spp=spp), chosen[1],
                                     pilot_s=time.perf_counter() - probe_start, notes=notes),
@@ -285,7 +285,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
 
 
-def _unmeasured(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | None:
+def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | None:
     """The MRT plan the scene's kind and ``pixels`` point to (:data:`HOME`,
     :data:`SKY`), with its reason, or None: the passes."""
     if lit_diffuse_by_points(scene):

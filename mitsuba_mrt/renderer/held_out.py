@@ -7,8 +7,8 @@ other: the mean squared difference between the image and their mean, less
 that mean's noise (a quarter of the two traces' mean squared difference),
 estimates the image's squared error there without a reference, whatever the
 sampler's stratification; that noise over the pixel filter's effective area
-is a full render's, the default target (for a stratifying sampler, whose
-noise falls faster than the spp rise, a little more than a full render's).
+estimates a full render's, the default target (``examples/held_out_check.py``
+measures both estimates against the truth).
 Every value is clipped to what a display shows, [0, 1], first, so that a
 rare bright sample does not swamp what the other pixels say.  Both are
 relative RMS errors over the pixels a display shows unclipped
