@@ -71,6 +71,8 @@ def check_image(image: np.ndarray, traced: np.ndarray, tracer, area: float) -> H
     begin = time.perf_counter()
     width = image.shape[1]
     index = held_out_pixels(traced)
+    if len(index) == 0:  # every pixel traced: the image is a full render's
+        return HeldOut(0.0, 0.0, 0, time.perf_counter() - begin)
     xy = np.stack([index % width, index // width], axis=1)
     # each pixel twice in one launch: a sampler draws other numbers for each lane
     trace = replace(tracer, spp=max(tracer.spp // 2, 1))(

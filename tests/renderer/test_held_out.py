@@ -42,3 +42,10 @@ def test_the_held_out_pixels_are_untraced_and_spread():
     assert rows.min() < 4 and rows.max() > 59
     assert len(held_out_pixels(np.ones((8, 8), bool))) == 0
     assert len(held_out_pixels(np.zeros((8, 8), bool))) == 64
+
+
+def test_an_image_traced_everywhere_needs_no_check(variant):
+    scene = mi.load_string(ball_scene_xml(16, spp=4))
+    tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), 4, 0)
+    held = check_image(np.zeros((16, 16, 3)), np.ones((16, 16), bool), tracer, 1.0)
+    assert (held.error, held.full_error, held.pixels) == (0.0, 0.0, 0)
