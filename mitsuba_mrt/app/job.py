@@ -132,7 +132,10 @@ def _why(result) -> str:
     choice = plan.choice
     text = f"auto: {choice.label}, {plan.reason}"
     if choice.error is not None:
-        text += f" (estimated error {choice.error:.4f})"
+        name = "a full render's" if choice.kind == "mrt" else "target"  # (mrt: its check's)
+        target = ("" if plan.target_error is None or plan.target_error == choice.error
+                  else f", {name} {plan.target_error:.4f}")
+        text += f" (estimated error {choice.error:.4f}{target})"
     return text
 
 
