@@ -27,11 +27,10 @@ ROOT = Path(__file__).resolve().parents[1]
 def true_rms(image, a, b):
     """``image``'s relative RMS error against the mean of ``a`` and ``b``, less their noise."""
     from mitsuba_mrt.recon.metrics import relative_error
+    from mitsuba_mrt.renderer.held_out import squared_error
 
     shown = np.clip(image, 0.0, 1.0).reshape(-1, 3)
-    a, b = (np.clip(v, 0.0, 1.0).reshape(-1, 3) for v in (a, b))
-    squared = (shown - (a + b) / 2) ** 2 - (a - b) ** 2 / 4
-    return relative_error(squared, shown)
+    return relative_error(squared_error(shown, a.reshape(-1, 3), b.reshape(-1, 3))[0], shown)
 
 
 def main():
@@ -42,6 +41,7 @@ def main():
     args = parser.parse_args()
 
     import mitsuba_mrt
+    from mitsuba_mrt.bench.experiments import gallery_defines
     from mitsuba_mrt.renderer import auto
     from mitsuba_mrt.renderer.api import GridTracer
     from mitsuba_mrt.renderer.held_out import check_image
@@ -52,8 +52,7 @@ def main():
     print(f"{'scene':15s} {'mode':7s} {'check':>7s} {'true':>7s} {'ratio':>6s} "
           f"{'check full':>10s} {'true full':>9s} {'ratio':>6s} {'check s / full':>14s}")
     for name in args.scenes:
-        defines = {"res": args.res, "spp": 64,
-                   **({"film_res": args.res + 128} if name == "crop_rgba" else {})}
+        defines = {**gallery_defines(name, args.res), "spp": 64}
         scene = mitsuba_mrt.load_scene(str(ROOT / "scenes_xml" / "gallery" / f"{name}.xml"),
                                        **defines)
         sensor = scene.sensors()[0]

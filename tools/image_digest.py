@@ -43,15 +43,15 @@ def main(argv=None) -> int:
     parser.add_argument("--gallery", action="store_true", help="add scenes_xml/gallery")
     args = parser.parse_args(argv)
     import mitsuba_mrt
+    from mitsuba_mrt.bench.experiments import gallery_defines
 
     variant = mitsuba_mrt.activate(args.variant)
     print(f"# variant {variant}, res {args.res}")
     jobs = [(path, {"res": args.res}) for path in sorted((ROOT / "scenes_xml").glob("*.xml"))]
     jobs.append((ROOT / "scenes_xml" / "paper_fig1.xml",
                  {"res": args.res, "integrator": "path", "spp": args.spp, "jitter": "true"}))
-    if args.gallery:  # (crop_rgba's crop window needs a film that holds it at its offset)
-        jobs += [(path, {"res": args.res, "spp": args.spp,
-                         **({"film_res": args.res + 128} if path.stem == "crop_rgba" else {})})
+    if args.gallery:
+        jobs += [(path, {**gallery_defines(path.stem, args.res), "spp": args.spp})
                  for path in sorted((ROOT / "scenes_xml" / "gallery").glob("*.xml"))]
     for path, defines in jobs:
         scene = mitsuba_mrt.load_scene(path, **defines)

@@ -242,16 +242,14 @@ def _bench(args) -> int:
 def _rival(args, command: str) -> int:
     from pathlib import Path
 
-    from ..bench.experiments import GALLERY_SCENES
+    from ..bench.experiments import GALLERY_SCENES, gallery_defines
     from ..bench.rival import run_rival
     from ..renderer.variants import activate
 
     activate(args.variant)
     root = Path(args.scenes) if args.scenes else Path(__file__).resolve().parents[2] / "scenes_xml"
     res = args.res or (64 if args.quick else 256)
-    # crop_rgba's crop window needs a film that holds it at its offset
-    scenes = [(root / "gallery" / f"{name}.xml", name,
-               {"res": res, **({"film_res": res + 128} if name == "crop_rgba" else {})})
+    scenes = [(root / "gallery" / f"{name}.xml", name, gallery_defines(name, res))
               for name in (GALLERY_SCENES[:2] if args.quick else GALLERY_SCENES)]
     scenes.append((root / "paper_fig1.xml", "paper_fig1",
                    {"res": 64 if args.quick else 400, "integrator": "path", "spp": 64,

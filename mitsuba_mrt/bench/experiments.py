@@ -60,6 +60,19 @@ FIGURES = {"fraction": "Fig. 6", "filter": "Fig. 7", "pixels": "Fig. 8", "object
 GALLERY_SCENES = ("checker_border", "cornell", "crop_rgba", "envmap_objects", "instanced",
                   "materials", "room", "spot_textures", "two_sensors")
 
+
+def gallery_defines(name: str, res: int) -> dict:
+    """The ``-D`` values that render gallery scene ``name`` at ``res`` a side:
+    ``crop_rgba``'s crop window needs a film that holds it at its offset.
+
+    Examples
+    --------
+    >>> gallery_defines("crop_rgba", 256), gallery_defines("cornell", 256)
+    ({'res': 256, 'film_res': 384}, {'res': 256})
+    """
+    return {"res": res, **({"film_res": res + 128} if name == "crop_rgba" else {})}
+
+
 #: The gallery's methods (``full`` besides): every MRT mode a user picks, and
 #: the baseline a user would reach for without the MRT.
 GALLERY_METHODS = ("mrt-auto", "mrt-paper", "mrt-fast", "mrt-refine", "mrt-idpass", "bicubic")

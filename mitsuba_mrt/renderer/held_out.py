@@ -77,9 +77,24 @@ def check_image(image: np.ndarray, traced: np.ndarray, tracer, area: float) -> H
     # each pixel twice in one launch: a sampler draws other numbers for each lane
     trace = replace(tracer, spp=max(tracer.spp // 2, 1))(
         np.concatenate([xy, xy]), stream=SeedStream.CHECK, aovs=False, replay=True)
-    first, second = np.split(np.clip(trace.radiance, 0.0, 1.0), 2)
     mine = np.clip(image.reshape(-1, 3)[index], 0.0, 1.0)
-    noise = (first - second) ** 2 / 4  # of their mean, in expectation
-    squared = (mine - (first + second) / 2) ** 2 - noise
+    squared, noise = squared_error(mine, *np.split(trace.radiance, 2))
     return HeldOut(relative_error(squared, mine), relative_error(noise / area, mine),
                    len(index), time.perf_counter() - begin)
+
+
+def squared_error(image: np.ndarray, first: np.ndarray, second: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(the squared error of ``image``, the squared noise of the mean of
+    ``first`` and ``second``), per value, estimated from those two independent
+    renders of the same pixels (see the module); every value clipped to [0, 1].
+
+    Examples
+    --------
+    >>> squared, noise = squared_error(np.array([0.8]), np.array([0.4]), np.array([0.6]))
+    >>> [round(float(v), 6) for v in (squared[0], noise[0])]
+    [0.08, 0.01]
+    """
+    image, first, second = (np.clip(v, 0.0, 1.0) for v in (image, first, second))
+    noise = (first - second) ** 2 / 4  # of their mean, in expectation
+    return (image - (first + second) / 2) ** 2 - noise, noise
