@@ -14,9 +14,11 @@ per scene: the median seconds of each and their ratio.
 import argparse
 import statistics
 import time
+from pathlib import Path
 
 import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
+from mitsuba_mrt.bench.experiments import gallery_defines
 from mitsuba_mrt.renderer.trace import trace_pixels
 
 
@@ -37,7 +39,8 @@ def main():
           f"median of {args.rounds}")
     print(f"{'scene':28s} {'radiance s':>10s} {'with AOVs s':>11s} {'ratio':>6s}")
     for path in args.scenes:
-        scene = mitsuba_mrt.load_scene(path, res=args.res, spp=args.spp, **defines)
+        scene = mitsuba_mrt.load_scene(path, **gallery_defines(Path(path).stem, args.res),
+                                       spp=args.spp, **defines)
         sensor = scene.sensors()[0]
         xy = grid_pattern(*(int(v) for v in sensor.film().crop_size()), args.fraction).pixel_xy
         times = {False: [], True: []}
