@@ -106,3 +106,26 @@ def run_starts(sorted_values: np.ndarray) -> np.ndarray:
     if values.size == 0:
         return np.zeros(0, dtype=np.intp)
     return np.flatnonzero(np.concatenate(([True], values[1:] != values[:-1])))
+
+
+def edge_share(id_map: np.ndarray) -> float:
+    """The share of an image's pixels that have a 4-neighbour of another id.
+
+    Examples
+    --------
+    >>> ids = np.zeros((4, 4), dtype=int); ids[:, 2:] = 1
+    >>> edge_share(ids)
+    0.5
+    >>> edge_share(np.zeros((3, 3), dtype=int))
+    0.0
+    """
+    ids = np.asarray(id_map)
+    if ids.size == 0:
+        return 0.0
+    edge = np.zeros(ids.shape, dtype=bool)
+    across, down = ids[:, 1:] != ids[:, :-1], ids[1:, :] != ids[:-1, :]
+    edge[:, 1:] |= across
+    edge[:, :-1] |= across
+    edge[1:, :] |= down
+    edge[:-1, :] |= down
+    return float(edge.mean())

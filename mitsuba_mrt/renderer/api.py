@@ -95,18 +95,26 @@ class MRTResult:
 class GridTracer:
     """The :class:`~mitsuba_mrt.types.Tracer` of a render: pixels of ``scene``
     seen through ``sensor``, traced with ``integrator`` at ``spp``, each
-    seed stream offset from ``seed``."""
+    seed stream offset from ``seed``.  ``id_pass``: the image's id pass
+    (every pixel, :data:`~mitsuba_mrt.types.SeedStream.ID_PASS`, AOVs
+    alone), where ``auto`` has traced it already: the call that asks for
+    it again gets it."""
 
     scene: mi.Scene
     sensor: mi.Sensor
     integrator: mi.Integrator
     spp: int
     seed: int
+    id_pass: SparseTrace | None = None
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
                  pad: bool = False, box: bool = False, ids: bool = True,
                  albedo: bool = True, halves: bool = False) -> SparseTrace:
+        known = self.id_pass
+        if (known is not None and stream == SeedStream.ID_PASS and aovs and not radiance
+                and ids and albedo and not box and len(pixel_xy) == len(known.shape_index)):
+            return known
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
                             self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
                             albedo, halves)
@@ -187,7 +195,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
             return _passes_result(outcome, tracer, params, start)
         if check:  # an MRT image chosen without a pilot: kept if its check says so
-            result = _mrt(pattern, replace(tracer, spp=choice.spp),
+            result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=outcome.id_pass),
                           params.with_(denoise="oidn" if choice.denoise else "none"),
                           choice.mode, plan, start, progress or _quiet, grid)
             return _checked(result, scene, pattern, tracer, params, start, progress)
@@ -287,7 +295,8 @@ def _passes_result(outcome: auto.AutoOutcome, tracer: GridTracer, params: MRTPar
     height, width = image.shape[:2]
     rgba = tracer.sensor.film().base_channels_count() == 4
     timings = Timings(trace=progress.trace_s, check=progress.estimate_s,
-                      denoise=progress.denoise_s)
+                      denoise=progress.denoise_s,
+                      trace_more=0.0 if outcome.id_pass is None else outcome.id_pass.seconds)
     return _whole_image_result(image, outcome.alpha if rgba else None, params, progress.spp,
                                plan, timings, start)
 

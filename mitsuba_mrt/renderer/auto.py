@@ -39,6 +39,7 @@ import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
 from ..recon.denoise import expected_seconds, oidn_available, preset
+from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern
 from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
@@ -100,6 +101,13 @@ HOME_MIN_SPP = 16
 #: alternative on five of nine gallery scenes).
 WIDE_PIXELS = 1 << 18
 WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, denoised grid"
+#: :data:`HOME` on such an image is traced only where at most this share of
+#: its pixels lie at an edge between ids (:func:`~mitsuba_mrt.recon.ids.edge_share`
+#: of the id pass, which ``idpass`` then reuses): where more do, the regions
+#: are small beside the grid's spacing and hold few of its samples each
+#: (``bench rival`` at 512 px: ``instanced``, 5.5 %, is the one gallery scene
+#: where ``idpass+oidn`` trails the passes; the others have 1.1-3.6 %).
+WIDE_EDGE_SHARE = 0.045
 #: The plan, under the same conditions, where an environment map lights the
 #: scene: mode ``refine``, OIDN on its grid.  Light from every direction
 #: shades the inside of a shape slowly, which the grid holds; where it does
@@ -133,7 +141,8 @@ _first_round_s: dict = {}
 class AutoOutcome:
     """``auto``'s plan, and the image when the passes made it (``grid``: the
     preview's grid, where tracing it told the plan; ``check``: the plan's
-    MRT image is to be checked, :func:`keeps`)."""
+    MRT image is to be checked, :func:`keeps`; ``id_pass``: the image's id
+    pass, where the plan traced it)."""
 
     plan: Plan
     image: np.ndarray | None = None
@@ -141,6 +150,7 @@ class AutoOutcome:
     progress: Progress | None = None
     grid: SparseTrace | None = None
     check: bool = False
+    id_pass: SparseTrace | None = None
 
 
 def keeps(held: HeldOut) -> bool:
@@ -197,13 +207,23 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
+    id_pass = None
     if escape and denoise and limit is None and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
         chosen = unmeasured_plan(scene, width * height)
+        if chosen is not None and chosen[1] == WIDE_REASON:
+            id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
+            share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
+            if share > WIDE_EDGE_SHARE:
+                notes.append(f"{share:.1%} of the pixels at an edge between ids: "
+                             f"too many for the MRT's grid")
+                chosen = None
         if chosen is not None:
             return AutoOutcome(Plan(replace(chosen[0], spp=spp), chosen[1],
-                                    pilot_s=time.perf_counter() - probe_start, notes=notes),
-                               check=True)
+                                    pilot_s=time.perf_counter() - probe_start
+                                    - (id_pass.seconds if id_pass is not None else 0.0),
+                                    notes=notes),
+                               check=True, id_pass=id_pass)
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
@@ -228,7 +248,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             if due():
                 return AutoOutcome(preview, grid=grid)
     if denoise and not found:
-        surfaces = _surfaces(scene, tracer, width, height)
+        surfaces = _surfaces(scene, tracer, width, height, id_pass)
     recorded = recordings()
     costs = {}
 
@@ -281,7 +301,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                         None if limit is not None else progress.full_error),
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
                     passes=list(progress.history))
-        return AutoOutcome(plan, image, alpha, progress)
+        return AutoOutcome(plan, image, alpha, progress, id_pass=id_pass)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
 
 
@@ -295,16 +315,30 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
     return (HOME, WIDE_REASON) if pixels >= WIDE_PIXELS else None
 
 
-def _surfaces(scene, tracer, width: int, height: int) -> tuple | None:
+def _surfaces(scene, tracer, width: int, height: int,
+              id_pass: SparseTrace | None = None) -> tuple | None:
     """(each pixel's shape index, :func:`textured_diffuse_shapes`) where the
     scene has a textured diffuse surface, else None: the ids of every pixel,
-    one ray through its centre, for the passes to find the textured pixels."""
+    one ray through its centre (``id_pass``'s where given), for the passes
+    to find the textured pixels."""
     textured = textured_diffuse_shapes(scene)
     if not textured.any():
         return None
-    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
-    ids = tracer(xy, stream=SeedStream.EDGES, radiance=False, albedo=False, replay=True)
-    return ids.shape_index, textured
+    if id_pass is None:
+        id_pass = tracer(_every_pixel(width, height), stream=SeedStream.EDGES, radiance=False,
+                         albedo=False, replay=True)
+    return id_pass.shape_index, textured
+
+
+def _every_pixel(width: int, height: int) -> np.ndarray:
+    """(column, row) of every pixel, rows outer."""
+    return np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+
+
+def _id_pass(tracer, width: int, height: int) -> SparseTrace:
+    """The image's id pass, as mode ``idpass`` traces it (and then reuses)."""
+    return tracer(_every_pixel(width, height), stream=SeedStream.ID_PASS, radiance=False,
+                  replay=True)
 
 
 def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:

@@ -198,6 +198,34 @@ def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(vari
     assert result.timings.check >= plan.pilot_s - 1e-9 > 0
 
 
+def test_the_large_images_id_pass_is_traced_once_for_the_gate_and_the_mode(variant,
+                                                                            monkeypatch):
+    from mitsuba_mrt.renderer import api
+    from mitsuba_mrt.types import SeedStream
+
+    id_passes = []
+    trace = api.trace_pixels
+
+    def counting(scene, sensor, integrator, pixel_xy, spp, seed, aovs, radiance, *rest):
+        if seed == SeedStream.ID_PASS and not radiance:
+            id_passes.append(len(pixel_xy))
+        return trace(scene, sensor, integrator, pixel_xy, spp, seed, aovs, radiance, *rest)
+
+    monkeypatch.setattr(api, "trace_pixels", counting)
+    result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
+    assert result.mode_used == "idpass" and id_passes == [512 * 512]
+    assert not result.auto.notes and result.timings.trace_more > 0
+
+
+def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, monkeypatch):
+    monkeypatch.setattr(auto, "WIDE_EDGE_SHARE", 0.0)  # the ball's outline is too much
+    result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
+    assert result.mode_used == "full+oidn" and result.auto.passes
+    assert any("of the pixels at an edge between ids" in n for n in result.auto.notes)
+    # the gate's id pass is counted as a trace beside the passes'
+    assert 0 < result.timings.trace_more < result.timings.total
+
+
 def test_an_id_pass_image_that_misses_its_check_gives_way_to_the_passes(variant, monkeypatch):
     monkeypatch.setattr(auto, "CHECK_SLACK", -1.0)  # no estimate is kept
     result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
