@@ -1,32 +1,38 @@
 """Mode ``auto``: denoised passes, a full render or the MRT, by measurement.
 
-:func:`run_auto` first renders the image in denoised passes
-(:mod:`.progressive`): each pass is part of the image, and the passes
-measure how good the denoised image gets, so the common case spends nothing
-on planning.  Under a time limit the passes fill it.  Without one they go
-on until the estimated error meets ``noise_threshold`` (default: the full
-render's own noise at the scene's spp, or half the scene's spp, where one
-more round would cost a full render), unless the scene
-is noise-free (:func:`noise_free`, a probe before the passes: then the
-full render, which is exact), the scene is of the report's kind (every
-surface diffuse, every light a point) or the image large and lit by no
-environment map (then :data:`HOME`, mode ``idpass`` with its grid
-denoised), or the scene is lit by an environment map (then :data:`SKY`,
-mode ``refine`` with its grid denoised) (each MRT image kept where its
-held-out check (:mod:`.held_out`, :func:`keeps`) finds it near a full
-render's quality, else the passes after it), a time limit leaves too little for OIDN on
-the whole image after one pass (judged before any pass: from the first
-round of an earlier time-limited render of the scene in the process, else
-from the preview's own grid, traced first; then a *preview*: mode ``fast``
-at one sample per grid pixel, its grid denoised: :data:`PREVIEW`), or, for
-a threshold asked for, a
-round (the third on) predicts that meeting it in passes costs more than a
-full render:
-then a pilot (:mod:`.pilot`) measures the MRT's modes on strips of the
-image where their grid costs less, and the planner
-(:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest candidate that
-meets the target.  :func:`plan_without_pilot` is the plan
-where nothing is worth measuring.
+:func:`run_auto` takes the first of these that applies:
+
+1. A noise-free scene (:func:`noise_free`, a small probe): the full render,
+   which is exact.
+2. The default target (no time limit, no ``noise_threshold``), OIDN
+   installed, at least :data:`HOME_MIN_SPP` spp: an MRT image where the
+   scene's kind says it wins (:func:`unmeasured_plan`): :data:`HOME` (mode
+   ``idpass``, its grid denoised) on the report's kind of scene (every
+   surface diffuse, every light a point) and on images of
+   :data:`WIDE_PIXELS` or more lit by no environment map whose id pass has
+   at most :data:`WIDE_EDGE_SHARE` of its pixels at an edge between ids;
+   :data:`SKY` (mode ``refine``, its grid denoised) under an environment
+   map.  The image is kept where its held-out check (:mod:`.held_out`,
+   :func:`keeps`) finds it near a full render's quality, else the passes
+   render the image after it.
+3. Under a time limit too short for one pass and OIDN on the whole image
+   (judged from the first round of an earlier time-limited render of the
+   scene in this process, else from the preview's own grid, traced first):
+   a *preview*, mode ``fast`` at one sample per grid pixel, its grid
+   denoised (:data:`PREVIEW`).
+4. Otherwise the image in denoised passes (:mod:`.progressive`): each pass
+   is part of the image, and the passes measure how good the denoised image
+   gets, so planning costs little.  Under a time limit they fill it;
+   without one they go on until the estimated error meets the target (by
+   default a full render's own noise at the scene's spp, the passes capped
+   at half that spp).  Where a round (the third on) predicts that meeting
+   a ``noise_threshold`` in passes costs more than a full render, a pilot
+   (:mod:`.pilot`) measures the MRT's modes on strips of the image and the
+   planner (:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest
+   candidate that meets it.
+
+:func:`plan_without_pilot` is the plan where nothing is worth measuring
+(the scalar variant, small jobs): the full render.
 """
 
 from __future__ import annotations
