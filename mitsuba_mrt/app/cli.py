@@ -187,6 +187,8 @@ def _render(args) -> int:
                     progress=not args.no_progress, **_job_options(args))
     summary = run_render_job(job)
     print(json.dumps(summary.as_dict(), indent=2) if args.json else summary_line(summary))
+    for note in (summary.auto or {}).get("notes", []):  # what the plan wants a user to know
+        print(f"note: {note}", file=sys.stderr)
     return 0
 
 

@@ -161,7 +161,27 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         result = _render(scene, integrator, sensor, spp, seed, params, mode, progress,
                          param_overrides)
     result.timings.compile = KernelCounts(*counts)
+    _note_overrun(result)
     return result
+
+
+#: A render under a time limit that takes more than this many times the limit
+#: says so in its plan's notes.
+OVERRUN = 1.1
+
+
+def _note_overrun(result: MRTResult) -> None:
+    """Add to ``result``'s plan a note of a time limit it overran (by more
+    than :data:`OVERRUN`): a limit below what the image can cost here."""
+    plan = result.auto
+    if plan is None or plan.time_limit is None:
+        return
+    took, limit = result.timings.total, plan.time_limit
+    if took > OVERRUN * limit:
+        least = (": the preview is the least this image costs here"
+                 if plan.choice == auto.PREVIEW else "")
+        plan.notes.append(f"took {took:.3f} s, {took / limit:.1f}x the time limit of "
+                          f"{limit:.3g} s{least}")
 
 
 def _render(scene, integrator, sensor, spp, seed, params, mode, progress,

@@ -292,6 +292,8 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
     assert result.params.denoise == "oidn" and result.timings.denoise > 0
     assert plan.time_limit == 1e-6 and plan.passes == []
     assert np.isfinite(result.image).all() and result.traced.grid > 0
+    assert plan.notes[-1].endswith("the time limit of 1e-06 s: the preview is the least "
+                                   "this image costs here")
     # the grid that told the plan is the preview's own: the image is the mode's
     direct = mitsuba_mrt.render(scene, mode="fast", spp=1, denoise="oidn")
     assert np.array_equal(result.image, direct.image)
@@ -449,6 +451,16 @@ def test_a_samplers_rounding_of_the_passes_spp_is_not_warned_of(tmp_path, varian
     proc = run_cli("render", path, "-o", tmp_path / "out", "--no-reference", "--no-progress")
     assert proc.returncode == 0 and "full+oidn" in proc.stdout
     assert "WARN" not in proc.stderr + proc.stdout
+
+
+def test_a_time_limit_the_render_overran_is_a_note(tmp_path):
+    proc = run_cli("render", ROOT / "scenes_xml" / "paper_fig1.xml", "-o", tmp_path,
+                   "--time-limit", "1e-6", "--no-reference")
+    assert proc.returncode == 0
+    notes = [line for line in proc.stderr.splitlines() if line.startswith("note: ")]
+    assert len(notes) == 1 and "x the time limit of 1e-06 s" in notes[0]
+    summary = json.loads(next(tmp_path.glob("*.json")).read_text())
+    assert notes[0] == "note: " + summary["auto"]["notes"][-1]
 
 
 @pytest.mark.parametrize("option", ["--time-limit", "--noise-threshold"])
