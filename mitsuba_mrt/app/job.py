@@ -135,7 +135,9 @@ def _why(result) -> str:
         name = "a full render's" if choice.kind == "mrt" else "target"  # (mrt: its check's)
         target = ("" if plan.target_error is None or plan.target_error == choice.error
                   else f", {name} {plan.target_error:.4f}")
-        text += f" (estimated error {choice.error:.4f}{target})"
+        estimate = (f"{choice.error:.4f}" if choice.error > 0 or choice.kind != "mrt"
+                    else "below what its check resolves")  # (its noise outweighed the error)
+        text += f" (estimated error {estimate}{target})"
     return text
 
 

@@ -53,3 +53,18 @@ def test_a_jobs_overrides_go_on_top_of_the_scenes_parameters():
     assert job.params_for(None) == MRTParams(sample_fraction=0.2)
     with pytest.raises(MRTError, match="sample_fraction"):
         RenderJob(scene="x.xml", param_overrides={"sample_fraction": 2.0}).params_for(None)
+
+
+def test_why_says_an_mrt_images_check_found_no_error_it_could_resolve():
+    from types import SimpleNamespace
+
+    from mitsuba_mrt.app.job import _why
+    from mitsuba_mrt.modes.plan import Candidate, Plan
+
+    def why(error):
+        choice = Candidate("idpass+oidn", "mrt", 64, mode="idpass", denoise=True, error=error)
+        return _why(SimpleNamespace(auto=Plan(choice, "the reason", target_error=0.0646)))
+
+    assert why(0.0).endswith("(estimated error below what its check resolves, "
+                             "a full render's 0.0646)")
+    assert why(0.0123).endswith("(estimated error 0.0123, a full render's 0.0646)")
