@@ -212,9 +212,13 @@ def test_the_large_images_id_pass_is_traced_once_for_the_gate_and_the_mode(varia
         return trace(scene, sensor, integrator, pixel_xy, spp, seed, aovs, radiance, *rest)
 
     monkeypatch.setattr(api, "trace_pixels", counting)
-    result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
+    scene = mi.load_string(scene_xml(512, spp=16))
+    result = mitsuba_mrt.render(scene)
     assert result.mode_used == "idpass" and id_passes == [512 * 512]
     assert not result.auto.notes and result.timings.trace_more > 0
+    # the image is the mode's own, its id pass traced anew
+    direct = mitsuba_mrt.render(scene, mode="idpass", denoise="oidn")
+    assert id_passes == [512 * 512] * 2 and np.array_equal(result.image, direct.image)
 
 
 def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, monkeypatch):
