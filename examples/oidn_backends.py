@@ -14,6 +14,7 @@ outputs.
 """
 
 import argparse
+import importlib.util
 import statistics
 import subprocess
 import sys
@@ -117,6 +118,12 @@ def main():
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--fresh", type=int, default=3)
     args = parser.parse_args()
+    missing = [name for name in ("pyoidn", "mitsuba_oidn")
+               if importlib.util.find_spec(name) is None]
+    if missing:
+        print(f"error: {' and '.join(missing)} not installed (pip install pyoidn mitsuba-oidn)",
+              file=sys.stderr)
+        sys.exit(2)
     firsts = first_calls(args.fresh)
     a, b = (statistics.median(firsts[k]) for k in (Pyoidn.name, MitsubaOidn.name))
     print(f"first call, fresh process, 256 px: pyoidn {a:.3f} s, mitsuba-oidn {b:.3f} s, "
