@@ -216,43 +216,19 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     id_pass = None
     if escape and denoise and limit is None and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        chosen = unmeasured_plan(scene, width * height)
-        if chosen is not None and chosen[1] == WIDE_REASON:
-            id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
-            share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
-            if share > WIDE_EDGE_SHARE:
-                notes.append(f"{share:.1%} of the pixels at an edge between ids: "
-                             f"too many for the MRT's grid")
-                chosen = None
-        if chosen is not None:
-            return AutoOutcome(Plan(replace(chosen[0], spp=spp), chosen[1],
-                                    pilot_s=time.perf_counter() - probe_start
-                                    - (id_pass.seconds if id_pass is not None else 0.0),
-                                    notes=notes),
-                               check=True, id_pass=id_pass)
+        outcome, id_pass = _mrt_by_kind(scene, tracer, params, width, height, notes,
+                                        probe_start)
+        if outcome is not None:
+            return outcome
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
-    grid, surfaces, found = None, None, False
+    surfaces, found = None, False
     if limit is not None and denoise:
-        end = started + PREVIEW_SLACK * limit
-        first_s = _first_round_s.get(key)
-        preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
-        if first_s is not None:
-            if _preview_due(end, started + first_s, width * height, params.denoise_quality):
-                return AutoOutcome(preview)
-        else:  # the preview's own grid says what a pass would cost
-            grid, pass_s = _grid_probe(pattern, tracer)
-
-            def due() -> bool:
-                return _preview_due(end, time.perf_counter() + pass_s, width * height,
-                                    params.denoise_quality)
-            if due():
-                return AutoOutcome(preview, grid=grid)
-            # the passes' textured pixels, then the same question with their time spent
-            surfaces, found = _surfaces(scene, tracer, width, height), True
-            if due():
-                return AutoOutcome(preview, grid=grid)
+        outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
+                                                  notes)
+        if outcome is not None:
+            return outcome
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, id_pass)
     recorded = recordings()
@@ -309,6 +285,54 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     passes=list(progress.history))
         return AutoOutcome(plan, image, alpha, progress, id_pass=id_pass)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, notes: list,
+                 probe_start: float) -> tuple[AutoOutcome | None, SparseTrace | None]:
+    """(the outcome of :func:`unmeasured_plan`'s MRT plan, its image to be
+    checked, or None: the passes; the image's id pass where the plan traced
+    it).  A large image's plan (:data:`WIDE_REASON`) traces the id pass first
+    and gives way to the passes, with a note, where more than
+    :data:`WIDE_EDGE_SHARE` of its pixels lie at an edge between ids."""
+    chosen = unmeasured_plan(scene, width * height)
+    id_pass = None
+    if chosen is not None and chosen[1] == WIDE_REASON:
+        id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
+        share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
+        if share > WIDE_EDGE_SHARE:
+            notes.append(f"{share:.1%} of the pixels at an edge between ids: "
+                         f"too many for the MRT's grid")
+            return None, id_pass
+    if chosen is None:
+        return None, None
+    pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
+    return AutoOutcome(Plan(replace(chosen[0], spp=tracer.spp), chosen[1], pilot_s=pilot_s,
+                            notes=notes), check=True, id_pass=id_pass), id_pass
+
+
+def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
+                   key: tuple, notes: list) -> tuple[AutoOutcome | None, tuple | None, bool]:
+    """Under a time limit: (the preview's outcome where one pass and OIDN on
+    the whole image would end after :data:`PREVIEW_SLACK` times the limit,
+    else None; the passes' textured surfaces (:func:`_surfaces`) and whether
+    they were looked up, which took time the question then counts)."""
+    width, height, limit = pattern.width, pattern.height, params.time_limit
+    end = started + PREVIEW_SLACK * limit
+    preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
+    first_s = _first_round_s.get(key)
+    if first_s is not None:
+        due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
+        return (AutoOutcome(preview) if due else None), None, False
+    grid, pass_s = _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
+
+    def due() -> bool:
+        return _preview_due(end, time.perf_counter() + pass_s, width * height,
+                            params.denoise_quality)
+    if due():
+        return AutoOutcome(preview, grid=grid), None, False
+    # the passes' textured pixels, then the same question with their time spent
+    surfaces = _surfaces(scene, tracer, width, height)
+    return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
 
 
 def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | None:
