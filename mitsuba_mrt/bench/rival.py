@@ -29,6 +29,7 @@ import numpy as np
 
 from ..imageio import OutputSet
 from ..recon.metrics import paper_error
+from ..recon.sampling import every_pixel
 
 #: spp of the alternative's ladder.
 LADDER = (1, 2, 4, 8, 16, 32, 64)
@@ -86,7 +87,7 @@ def flip_error(image: np.ndarray, reference: np.ndarray) -> float:
 
 def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarray:
     """The mean of passes of 64 spp over every pixel (box-filtered with ``box``)."""
-    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    xy = every_pixel(width, height)
     passes = max(1, spp // 64)
     one = replace(tracer, spp=min(spp, 64))
     total = sum(one(xy, stream=100 + k, aovs=False, replay=True, box=box).radiance

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..recon.compose import demodulate
 from ..recon.mixed import unmix_edges
-from ..recon.sampling import SamplePattern, cell_coordinates
+from ..recon.sampling import SamplePattern, cell_coordinates, every_pixel
 from ..recon.within_region import (GridValues, black_background, early_values,
                                    interpolate_within_ids)
 from ..runtime.threads import beside
@@ -70,7 +70,7 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     early = beside(early_values, pattern, grid_ids, grid.values)  # the cubic, beside the id pass
     grid_s = time.perf_counter() - start
     start = time.perf_counter()
-    every = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    every = every_pixel(width, height)
     called = time.perf_counter()
     aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False, replay=True)
     called = time.perf_counter() - called  # (less than its seconds where ``auto`` traced it)

@@ -149,6 +149,18 @@ def cell_coordinates(positions: np.ndarray, length: int) -> tuple[np.ndarray, np
     return i, np.clip((x - lo) / (hi - lo), 0.0, 1.0)
 
 
+def every_pixel(width: int, height: int) -> np.ndarray:
+    """(column, row) of every pixel of a ``width`` x ``height`` image, rows
+    outer: a full pass's pixels, in the order of the image's rows.
+
+    Examples
+    --------
+    >>> every_pixel(2, 2).tolist()
+    [[0, 0], [1, 0], [0, 1], [1, 1]]
+    """
+    return np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+
+
 def grid_pattern(width: int, height: int, sample_fraction: float) -> SamplePattern:
     """The report's grid of traced pixels.
 

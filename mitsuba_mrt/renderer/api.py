@@ -24,7 +24,7 @@ from ..modes import check_mode, render_modes
 from ..modes.plan import Plan
 from ..recon.compose import region_values
 from ..recon.denoise import denoise_image
-from ..recon.sampling import SamplePattern, grid_pattern
+from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
 from ..runtime.jit import counting_kernels
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
                      TracedCounts, check_radiance)
@@ -298,7 +298,7 @@ def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     tracer = GridTracer(scene, sensor, unwrap(scene, integrator).nested, spp, seed)
     width, height = (int(v) for v in sensor.film().crop_size())
-    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    xy = every_pixel(width, height)
     trace = tracer(xy, stream=SeedStream.GRID, aovs=True, ids=False, replay=True, box=True)
     check_radiance(trace.radiance, "pixels")
     image = denoise_image(*(v.reshape(height, width, 3)

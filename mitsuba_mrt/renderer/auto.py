@@ -46,7 +46,7 @@ import numpy as np
 from ..modes.plan import Candidate, Plan, choose
 from ..recon.denoise import expected_seconds, oidn_available, preset
 from ..recon.ids import edge_share
-from ..recon.sampling import SamplePattern
+from ..recon.sampling import SamplePattern, every_pixel
 from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
 from .held_out import HeldOut
@@ -295,16 +295,16 @@ def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, note
     and gives way to the passes, with a note, where more than
     :data:`WIDE_EDGE_SHARE` of its pixels lie at an edge between ids."""
     chosen = unmeasured_plan(scene, width * height)
+    if chosen is None:
+        return None, None
     id_pass = None
-    if chosen is not None and chosen[1] == WIDE_REASON:
+    if chosen[1] == WIDE_REASON:
         id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
         share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
         if share > WIDE_EDGE_SHARE:
             notes.append(f"{share:.1%} of the pixels at an edge between ids: "
                          f"too many for the MRT's grid")
             return None, id_pass
-    if chosen is None:
-        return None, None
     pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
     return AutoOutcome(Plan(replace(chosen[0], spp=tracer.spp), chosen[1], pilot_s=pilot_s,
                             notes=notes), check=True, id_pass=id_pass), id_pass
@@ -355,19 +355,14 @@ def _surfaces(scene, tracer, width: int, height: int,
     if not textured.any():
         return None
     if id_pass is None:
-        id_pass = tracer(_every_pixel(width, height), stream=SeedStream.EDGES, radiance=False,
+        id_pass = tracer(every_pixel(width, height), stream=SeedStream.EDGES, radiance=False,
                          albedo=False, replay=True)
     return id_pass.shape_index, textured
 
 
-def _every_pixel(width: int, height: int) -> np.ndarray:
-    """(column, row) of every pixel, rows outer."""
-    return np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
-
-
 def _id_pass(tracer, width: int, height: int) -> SparseTrace:
     """The image's id pass, as mode ``idpass`` traces it (and then reuses)."""
-    return tracer(_every_pixel(width, height), stream=SeedStream.ID_PASS, radiance=False,
+    return tracer(every_pixel(width, height), stream=SeedStream.ID_PASS, radiance=False,
                   replay=True)
 
 

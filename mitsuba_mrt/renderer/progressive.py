@@ -36,6 +36,7 @@ import numpy as np
 from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading,
                              expected_seconds, preset, textured_pixels)
 from ..recon.metrics import relative_error
+from ..recon.sampling import every_pixel
 from ..types import SeedStream
 from .scene_query import sampler_bakes_spp
 
@@ -404,7 +405,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     the last OIDN call denoise the textured pixels as their shading
     (:attr:`Passes.shading`).
     """
-    xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    xy = every_pixel(width, height)
     n = len(xy)
     rows = estimate_rows(height, width)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
