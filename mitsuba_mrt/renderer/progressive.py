@@ -22,7 +22,10 @@ their cap is not estimated, only predicted.  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 Under a time limit alone no error is estimated: the passes only fill the
 time, less what the last OIDN call is expected to take
-(:func:`~mitsuba_mrt.recon.denoise.expected_seconds`).
+(:func:`~mitsuba_mrt.recon.denoise.expected_seconds`), in launches of 1,
+2, 4 ... spp and then one of as many as the launches' cost so far says
+fit (:class:`LaunchCost`: a launch's fixed part makes a few large launches
+cheaper than many small ones).
 """
 
 from __future__ import annotations
@@ -362,25 +365,89 @@ def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: floa
                          denoise_seconds(pixels, "high"))
 
 
+@dataclass
+class LaunchCost:
+    """What a launch of passes costs: ``fixed + per_spp * spp`` seconds, the
+    line through the launches so far (``launches``: (spp, seconds)) moved up
+    until no launch took longer than it says.
+
+    A launch's fixed part (its kernels' start, reading every pixel back)
+    makes a 1-spp launch cost about two of a larger launch's spp; with one
+    size measured the line goes through 0 (every spp costs what that
+    launch's did: more than a larger launch takes).
+
+    Examples
+    --------
+    >>> cost = LaunchCost()
+    >>> cost.add(1, 0.018); round(cost(4), 3)
+    0.072
+    >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
+    (0.06, 5)
+    """
+
+    launches: list = field(default_factory=list)
+
+    def add(self, spp: int, seconds: float) -> None:
+        self.launches.append((int(spp), float(seconds)))
+
+    def _line(self) -> tuple[float, float]:
+        """(fixed, per_spp)."""
+        if not self.launches:
+            return 0.0, 0.0
+        spp, seconds = (np.array(v, dtype=float) for v in zip(*self.launches))
+        fixed = 0.0
+        if len(set(spp)) > 1:
+            fixed = float(np.clip(np.polyfit(spp, seconds, 1)[1], 0.0, seconds.min()))
+        return fixed, float(((seconds - fixed) / spp).max())
+
+    def __call__(self, spp: int) -> float:
+        """Seconds a launch of ``spp`` is expected to take."""
+        fixed, per_spp = self._line()
+        return fixed + per_spp * spp
+
+    def fits(self, seconds: float) -> int:
+        """The most spp a launch expected to take at most ``seconds`` may have."""
+        fixed, per_spp = self._line()
+        return int((seconds - fixed) // per_spp) if per_spp > 0 and seconds > fixed else 0
+
+
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
-          pass_s: float, recorded: int, max_spp: int, launch: int, split: bool) -> None:
+          cost: LaunchCost, max_spp: int, launch: int, halves: bool, any_spp: bool) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
-    value) that a whole round does not: launches of the largest power of two
-    up to ``recorded`` spp (an spp the rounds have launched: replayed, not
-    recorded anew) that fits at ``pass_s`` seconds a pass, while one does;
-    with ``split``, each launch into both halves (at least 2 spp), else
+    value) that a whole round does not: launches of the most spp that
+    ``cost`` expects to end by then (times :data:`ROUND_SAFETY`), while one
+    does; with ``any_spp`` of any count (a new count is recorded before it
+    is replayed: the safety's share), else of one spp each.  With
+    ``halves`` each launch goes into both halves (at least 2 spp), else
     into one half and the next into the other."""
     while passes.count < max_spp:
-        fits = (until - time.perf_counter()) / (ROUND_SAFETY * pass_s) if pass_s > 0 else 0.0
-        spp = min(recorded, max_spp - passes.count, int(fits))
-        if spp < (2 if split else 1):
+        fits = cost.fits((until - time.perf_counter()) / ROUND_SAFETY)
+        spp = min(max_spp - passes.count, fits if any_spp else min(fits, 1))
+        if spp < (2 if halves else 1):
             return
         begin = time.perf_counter()
-        _trace_pass(passes, tracer, xy, 1 << (spp.bit_length() - 1), launch,
-                    None if split else launch % 2)
+        _trace_pass(passes, tracer, xy, spp, launch, None if halves else launch % 2)
         launch += 1
+        cost.add(spp, time.perf_counter() - begin)
         progress.trace_s += time.perf_counter() - begin
         progress.spp = passes.count
+
+
+def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int, split: bool,
+                 estimates: bool, cost: LaunchCost) -> int:
+    """A round of ``size`` passes (from launch number ``launch``; the next
+    launch's number is returned), each launch's time added to ``cost``: with
+    ``split`` one launch, its halves its odd and even samples (without
+    ``estimates``, all of it into half 0), else a launch a pass, the first
+    half of them into half 0."""
+    launches = [(size, None if estimates else 0)] if split else [
+        (1, 2 * k // size) for k in range(size)]
+    for spp, half in launches:
+        begin = time.perf_counter()
+        _trace_pass(passes, tracer, xy, spp, launch, half)
+        cost.add(spp, time.perf_counter() - begin)
+        launch += 1
+    return launch
 
 
 def run_passes(tracer, width: int, height: int, *, quality: str,
@@ -428,16 +495,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # a sampler that compiles kernels per spp traces every pass at 1 spp
     # instead (a new spp's compilation would overrun it), a half a launch
     split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
+    cost = LaunchCost()
     while True:
         begin = time.perf_counter()
-        if split:
-            _trace_pass(passes, tracer, xy, round_size, launch, None if estimates else 0)
-            launch, launch_spp = launch + 1, round_size
-        else:
-            launch_spp = 1
-            for k in range(round_size):  # a launch a pass, the round's first half into half 0
-                _trace_pass(passes, tracer, xy, 1, launch, 2 * k // round_size)
-                launch += 1
+        launch = _trace_round(passes, tracer, xy, round_size, launch, split, estimates, cost)
         if surfaces is not None and denoise and passes.textured is None \
                 and passes.count == passes.guides:  # the first round: the textured pixels
             passes.textured = textured_pixels(surfaces[0], passes.guide()[0], surfaces[1])
@@ -447,7 +508,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         progress.trace_s += spent
         pass_s = spent / round_size
         progress.spp = passes.count
-        next_size = passes.count  # the next round doubles the passes
+        # the next round doubles the passes; without estimates (no halves) the
+        # launches double from the first: 1, 2, 4 ... spp
+        next_size = passes.count + (0 if estimates or not split else 1)
         at_cap = passes.count + next_size > max_spp  # this round is the last
         if estimates and denoise and progress.history and at_cap:
             # its estimate would change no decision: the earlier rounds' predict it
@@ -474,14 +537,15 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         if at_cap:
             progress.stopped = f"reached {passes.count} spp"
             break
-        if deadline is not None and (time.perf_counter() + ROUND_SAFETY * next_size * pass_s
+        round_s = cost(next_size) if split else next_size * cost(1)
+        if deadline is not None and (time.perf_counter() + ROUND_SAFETY * round_s
                                      + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             # the passes fill what the last OIDN call leaves of the time
             left = max(deadline - time.perf_counter() - oidn_px * n, 0.0)
             final = _final_preset(final, progress, progress.trace_s + left, oidn_px * n, left, n)
             _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_px * n, n),
-                  pass_s, launch_spp, max_spp, launch, split and estimates)
+                  cost, max_spp, launch, halves=split and estimates, any_spp=split)
             break
         round_size = next_size
     image = passes.mean

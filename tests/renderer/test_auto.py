@@ -491,8 +491,10 @@ def test_progress_hears_of_the_mrt_stages(variant):
     assert heard == ["trace", "reconstruct"]
 
 
-@pytest.mark.parametrize("split", [False, True], ids=["a half a launch", "halves in a launch"])
-def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatch, split):
+@pytest.mark.parametrize("halves, any_spp", [(False, False), (False, True), (True, True)],
+                         ids=["one spp a launch", "any spp", "halves in a launch"])
+def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatch, halves,
+                                                                      any_spp):
     from dataclasses import dataclass
 
     from mitsuba_mrt.renderer import progressive
@@ -503,12 +505,12 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
     launched = []
 
     @dataclass(frozen=True)
-    class Tracer:  # one second a sample per pixel, on the fake clock
+    class Tracer:  # on the fake clock: 1 s a launch, and 1 s a sample per pixel
         spp: int = 1
 
         def __call__(self, xy, **_):
             launched.append(self.spp)
-            clock[0] += self.spp
+            clock[0] += 1 + self.spp
             n = len(xy)
             return SparseTrace(np.full((n, 3), 0.5), np.full((n, 3), 0.5), np.ones(n, np.int64),
                                np.zeros(n, np.uint32), 0, self.spp, 0.0,
@@ -517,15 +519,21 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
 
     xy = np.zeros((4, 2), dtype=np.int64)
     passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
-    passes.add(Tracer(2)(xy), None if split else 0, True)
+    passes.add(Tracer(2)(xy), None if halves else 0, True)
+    cost = progressive.LaunchCost([(1, 2.0), (2, 3.0)])  # the line 1 + spp, measured
     start = clock[0]
-    progressive._fill(passes, progress, Tracer(), xy, until=start + 5.0, pass_s=1.0,
-                      recorded=4, max_spp=64, launch=1, split=split)
-    # 5 s left at 1.3 s a pass (the safety): 2 spp, then 2, then 0.77 passes: none
-    assert launched[1:] == [2, 2] and clock[0] <= start + 5.0
-    assert passes.count == 6 and progress.spp == 6
+    progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
+                      max_spp=64, launch=1, halves=halves, any_spp=any_spp)
+    # 13 s left, a launch at most 1 / 1.3 of what is left (the safety): 9 spp
+    # (10 s), then 1 (2 s) where one spp a launch is not asked, 2 where halves
+    # are (none); or 1-spp launches of 2 s while 2.6 s are left (6 of them)
+    expected = {(False, False): [1] * 6, (False, True): [9, 1], (True, True): [9]}
+    assert launched[1:] == expected[halves, any_spp] and clock[0] <= start + 13.0
+    assert passes.count == 2 + sum(launched[1:]) and progress.spp == passes.count
+    assert cost.launches[2:] == [(s, 1.0 + s) for s in launched[1:]]
     # halves from a launch's odd and even samples are as large as each other
-    assert passes.half_counts == ([3, 3] if split else [4, 2])
+    if halves:
+        assert passes.half_counts == [6, 5]
 
 
 def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
