@@ -22,10 +22,10 @@ their cap is not estimated, only predicted.  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 Under a time limit alone no error is estimated: the passes only fill the
 time, less what the last OIDN call is expected to take
-(:func:`~mitsuba_mrt.recon.denoise.expected_seconds`), in launches of 1,
-2, 4 ... spp and then one of as many as the launches' cost so far says
-fit (:class:`LaunchCost`: a launch's fixed part makes a few large launches
-cheaper than many small ones).
+(:func:`~mitsuba_mrt.recon.denoise.expected_seconds`): a launch of 1 spp,
+then launches of as many spp as the launches' cost so far says fit
+(:class:`LaunchCost`: a launch's fixed part makes a few large launches
+cheaper than many small ones, as one launch is the alternative's).
 """
 
 from __future__ import annotations
@@ -508,9 +508,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         progress.trace_s += spent
         pass_s = spent / round_size
         progress.spp = passes.count
-        # the next round doubles the passes; without estimates (no halves) the
-        # launches double from the first: 1, 2, 4 ... spp
-        next_size = passes.count + (0 if estimates or not split else 1)
+        next_size = passes.count  # the next round doubles the passes
         at_cap = passes.count + next_size > max_spp  # this round is the last
         if estimates and denoise and progress.history and at_cap:
             # its estimate would change no decision: the earlier rounds' predict it
@@ -537,9 +535,11 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         if at_cap:
             progress.stopped = f"reached {passes.count} spp"
             break
+        # without estimates nothing is learnt from rounds: after the first
+        # (which measures a launch) the passes fill the time at once
         round_s = cost(next_size) if split else next_size * cost(1)
-        if deadline is not None and (time.perf_counter() + ROUND_SAFETY * round_s
-                                     + oidn_px * n > deadline):
+        if deadline is not None and (not estimates or time.perf_counter()
+                                     + ROUND_SAFETY * round_s + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             # the passes fill what the last OIDN call leaves of the time
             left = max(deadline - time.perf_counter() - oidn_px * n, 0.0)
