@@ -41,6 +41,7 @@ from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading,
 from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..types import SeedStream
+from .replay import recordings
 from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
@@ -368,8 +369,10 @@ def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: floa
 @dataclass
 class LaunchCost:
     """What a launch of passes costs: ``fixed + per_spp * spp`` seconds, the
-    line through the launches so far (``launches``: (spp, seconds)) moved up
-    until no launch took longer than it says.
+    line through the launches so far (``launches``: (spp, seconds, whether
+    it recorded its kernels' replay, :mod:`.replay`)) moved up until no
+    launch took longer than it says; a launch of an spp not launched before
+    records anew, which adds :attr:`record_s`.
 
     A launch's fixed part (its kernels' start, reading every pixel back)
     makes a 1-spp launch cost about two of a larger launch's spp; with one
@@ -379,36 +382,57 @@ class LaunchCost:
     Examples
     --------
     >>> cost = LaunchCost()
-    >>> cost.add(1, 0.018); round(cost(4), 3)
-    0.072
+    >>> cost.add(1, 0.036, recorded=True); cost.add(1, 0.018); round(cost(4), 3)
+    0.09
+    >>> round(cost.record_s, 3), cost.fits(0.05), cost.fits(0.07)
+    (0.018, 1, 2)
     >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
-    (0.06, 5)
+    (0.078, 3)
     """
 
     launches: list = field(default_factory=list)
 
-    def add(self, spp: int, seconds: float) -> None:
-        self.launches.append((int(spp), float(seconds)))
+    def add(self, spp: int, seconds: float, recorded: bool = False) -> None:
+        self.launches.append((int(spp), float(seconds), bool(recorded)))
+
+    @property
+    def record_s(self) -> float:
+        """What recording adds to a launch: the most a recorded launch took
+        beyond the quickest replayed launch of its spp (0 before one was replayed)."""
+        replayed = {}
+        for spp, seconds, recorded in self.launches:
+            if not recorded:
+                replayed[spp] = min(replayed.get(spp, seconds), seconds)
+        return max([seconds - replayed[spp] for spp, seconds, recorded in self.launches
+                    if recorded and spp in replayed] + [0.0])
 
     def _line(self) -> tuple[float, float]:
-        """(fixed, per_spp)."""
+        """(fixed, per_spp) of a replayed launch."""
         if not self.launches:
             return 0.0, 0.0
-        spp, seconds = (np.array(v, dtype=float) for v in zip(*self.launches))
+        extra = self.record_s
+        spp = np.array([s for s, _, _ in self.launches], dtype=float)
+        seconds = np.array([t - (extra if r else 0.0) for _, t, r in self.launches])
         fixed = 0.0
         if len(set(spp)) > 1:
             fixed = float(np.clip(np.polyfit(spp, seconds, 1)[1], 0.0, seconds.min()))
         return fixed, float(((seconds - fixed) / spp).max())
 
     def __call__(self, spp: int) -> float:
-        """Seconds a launch of ``spp`` is expected to take."""
+        """Seconds a launch of ``spp`` is expected to take (recorded anew
+        where no launch had that spp)."""
         fixed, per_spp = self._line()
-        return fixed + per_spp * spp
+        new = all(spp != s for s, _, _ in self.launches)
+        return fixed + per_spp * spp + (self.record_s if new else 0.0)
 
     def fits(self, seconds: float) -> int:
         """The most spp a launch expected to take at most ``seconds`` may have."""
         fixed, per_spp = self._line()
-        return int((seconds - fixed) // per_spp) if per_spp > 0 and seconds > fixed else 0
+        if per_spp <= 0:
+            return 0
+        launched = [s for s, _, _ in self.launches if fixed + per_spp * s <= seconds]
+        anew = int((seconds - self.record_s - fixed) // per_spp)
+        return max(launched + [anew, 0])
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
@@ -425,10 +449,10 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
         spp = min(max_spp - passes.count, fits if any_spp else min(fits, 1))
         if spp < (2 if halves else 1):
             return
-        begin = time.perf_counter()
+        begin, recorded = time.perf_counter(), recordings()
         _trace_pass(passes, tracer, xy, spp, launch, None if halves else launch % 2)
         launch += 1
-        cost.add(spp, time.perf_counter() - begin)
+        cost.add(spp, time.perf_counter() - begin, recordings() > recorded)
         progress.trace_s += time.perf_counter() - begin
         progress.spp = passes.count
 
@@ -443,9 +467,9 @@ def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int,
     launches = [(size, None if estimates else 0)] if split else [
         (1, 2 * k // size) for k in range(size)]
     for spp, half in launches:
-        begin = time.perf_counter()
+        begin, recorded = time.perf_counter(), recordings()
         _trace_pass(passes, tracer, xy, spp, launch, half)
-        cost.add(spp, time.perf_counter() - begin)
+        cost.add(spp, time.perf_counter() - begin, recordings() > recorded)
         launch += 1
     return launch
 
@@ -535,10 +559,12 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         if at_cap:
             progress.stopped = f"reached {passes.count} spp"
             break
-        # without estimates nothing is learnt from rounds: after the first
-        # (which measures a launch) the passes fill the time at once
+        # without estimates nothing is learnt from rounds: once a launch was
+        # replayed (the first, if it recorded, is not a launch's cost), the
+        # passes fill the time at once
         round_s = cost(next_size) if split else next_size * cost(1)
-        if deadline is not None and (not estimates or time.perf_counter()
+        measured = passes.count >= FIRST_ROUND or not cost.launches[-1][2]
+        if deadline is not None and ((not estimates and measured) or time.perf_counter()
                                      + ROUND_SAFETY * round_s + oidn_px * n > deadline):
             progress.stopped = "the time limit"
             # the passes fill what the last OIDN call leaves of the time

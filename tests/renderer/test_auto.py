@@ -520,7 +520,7 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
     xy = np.zeros((4, 2), dtype=np.int64)
     passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
     passes.add(Tracer(2)(xy), None if halves else 0, True)
-    cost = progressive.LaunchCost([(1, 2.0), (2, 3.0)])  # the line 1 + spp, measured
+    cost = progressive.LaunchCost([(1, 2.0, False), (2, 3.0, False)])  # the line 1 + spp
     start = clock[0]
     progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
                       max_spp=64, launch=1, halves=halves, any_spp=any_spp)
@@ -530,7 +530,7 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
     expected = {(False, False): [1] * 6, (False, True): [9, 1], (True, True): [9]}
     assert launched[1:] == expected[halves, any_spp] and clock[0] <= start + 13.0
     assert passes.count == 2 + sum(launched[1:]) and progress.spp == passes.count
-    assert cost.launches[2:] == [(s, 1.0 + s) for s in launched[1:]]
+    assert cost.launches[2:] == [(s, 1.0 + s, False) for s in launched[1:]]
     # halves from a launch's odd and even samples are as large as each other
     if halves:
         assert passes.half_counts == [6, 5]
