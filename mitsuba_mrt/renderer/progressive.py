@@ -369,9 +369,9 @@ def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: floa
 @dataclass
 class LaunchCost:
     """What a launch of passes costs: ``fixed + per_spp * spp`` seconds, the
-    line through the launches so far (``launches``: (spp, seconds, whether
-    it recorded its kernels' replay, :mod:`.replay`)) moved up until no
-    launch took longer than it says; a launch of an spp not launched before
+    line through the replayed launches so far (``launches``: (spp, seconds,
+    whether it recorded its kernels' replay, :mod:`.replay`)) moved up until
+    none took longer than it says; a launch of an spp not launched before
     records anew, which adds :attr:`record_s`.
 
     A launch's fixed part (its kernels' start, reading every pixel back)
@@ -388,6 +388,12 @@ class LaunchCost:
     (0.018, 1, 2)
     >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
     (0.078, 3)
+
+    A recorded launch's time bounds what recording adds, not the line:
+
+    >>> cost = LaunchCost([(1, 0.045, True), (1, 0.020, False), (4, 0.050, True)])
+    >>> round(cost.record_s, 3), cost.fits(0.1)
+    (0.025, 4)
     """
 
     launches: list = field(default_factory=list)
@@ -395,28 +401,28 @@ class LaunchCost:
     def add(self, spp: int, seconds: float, recorded: bool = False) -> None:
         self.launches.append((int(spp), float(seconds), bool(recorded)))
 
-    @property
-    def record_s(self) -> float:
-        """What recording adds to a launch: the most a recorded launch took
-        beyond the quickest replayed launch of its spp (0 before one was replayed)."""
-        replayed = {}
-        for spp, seconds, recorded in self.launches:
-            if not recorded:
-                replayed[spp] = min(replayed.get(spp, seconds), seconds)
-        return max([seconds - replayed[spp] for spp, seconds, recorded in self.launches
-                    if recorded and spp in replayed] + [0.0])
-
     def _line(self) -> tuple[float, float]:
-        """(fixed, per_spp) of a replayed launch."""
-        if not self.launches:
+        """(fixed, per_spp) of a replayed launch: through the replayed
+        launches (all of them where none was)."""
+        points = [(s, t) for s, t, recorded in self.launches if not recorded] or [
+            (s, t) for s, t, _ in self.launches]
+        if not points:
             return 0.0, 0.0
-        extra = self.record_s
-        spp = np.array([s for s, _, _ in self.launches], dtype=float)
-        seconds = np.array([t - (extra if r else 0.0) for _, t, r in self.launches])
+        spp, seconds = (np.array(v, dtype=float) for v in zip(*points))
         fixed = 0.0
         if len(set(spp)) > 1:
             fixed = float(np.clip(np.polyfit(spp, seconds, 1)[1], 0.0, seconds.min()))
         return fixed, float(((seconds - fixed) / spp).max())
+
+    @property
+    def record_s(self) -> float:
+        """What recording adds to a launch: the most a recorded launch took
+        beyond the line (0 where no launch, or every launch, recorded)."""
+        if all(recorded for _, _, recorded in self.launches):
+            return 0.0
+        fixed, per_spp = self._line()
+        return max([t - fixed - per_spp * s for s, t, recorded in self.launches if recorded]
+                   + [0.0])
 
     def __call__(self, spp: int) -> float:
         """Seconds a launch of ``spp`` is expected to take (recorded anew
