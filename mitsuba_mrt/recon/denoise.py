@@ -124,19 +124,27 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
 #: with both guides, before any call in the process has measured it: a
 #: little above what it takes on a 2-core x86 CPU (256-512 px), so that a
 #: first time-limited render plans for a call no faster than it will be.
-PRIOR_SECONDS = {"fast": 1.3e-6, "balanced": 2.2e-6, "high": 2.2e-6}
+PRIOR_SECONDS = {"fast": 1.45e-6, "balanced": 2.8e-6, "high": 2.8e-6}
+#: The first call on an image size at a preset takes this share longer than
+#: the next ones (OIDN makes that filter's buffers as it runs): 0.25-0.35 on
+#: 2 cores at 256-512 px.
+FIRST_CALL_SHARE = 0.35
 
 
 def expected_seconds(pixels: int, quality: str) -> float:
-    """:func:`denoise_seconds`, or before any call at ``quality`` in this
-    process :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker
-    threads (OIDN's threads here)."""
+    """What the next call on ``pixels`` pixels at ``quality`` is expected to
+    take: the last call's on that many pixels; else :func:`denoise_seconds`
+    (from other sizes), or before any call at ``quality`` in this process
+    :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
+    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
     seconds = denoise_seconds(pixels, quality)
-    if seconds is not None:
+    if pixels in _state.get("seconds", {}).get(quality, {}):
         return seconds
-    import drjit as dr
+    if seconds is None:
+        import drjit as dr
 
-    return PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1)
+        seconds = PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1)
+    return seconds * (1.0 + FIRST_CALL_SHARE)
 
 
 def _device(oidn):

@@ -36,8 +36,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..recon.denoise import (denoise_image, denoise_seconds, denoise_shading,
-                             expected_seconds, preset, textured_pixels)
+from ..recon.denoise import (denoise_image, denoise_shading, expected_seconds, preset,
+                             textured_pixels)
 from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..types import SeedStream
@@ -349,11 +349,11 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
 
 
 def _oidn_s(quality: str, fast_s: float, pixels: int) -> float:
-    """Seconds OIDN takes on ``pixels`` at ``quality``, ``fast_s`` at ``fast``
-    (from an earlier call at ``quality``, or predicted from ``fast_s``)."""
+    """Seconds OIDN is expected to take on ``pixels`` at ``quality``:
+    ``fast_s`` at ``fast``, else :func:`~mitsuba_mrt.recon.denoise.expected_seconds`."""
     if quality == "fast":
         return fast_s
-    return denoise_seconds(pixels, quality) or HIGH_COST * fast_s
+    return expected_seconds(pixels, quality)
 
 
 def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: float,
@@ -363,7 +363,7 @@ def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: floa
     if quality != "auto":
         return quality
     return final_quality(trace_s, fast_s, rate_of(progress.history), time_left,
-                         denoise_seconds(pixels, "high"))
+                         expected_seconds(pixels, "high"))
 
 
 @dataclass
@@ -547,7 +547,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             begin = time.perf_counter()
             _estimate(passes, progress, width, quality, full_spp, area, denoise)
             # OIDN's cost on the whole image, from the estimate's call (and earlier ones)
-            oidn_px = denoise_seconds(n, quality) / n if denoise else 0.0
+            oidn_px = expected_seconds(n, quality) / n if denoise else 0.0
             progress.estimate_s += time.perf_counter() - begin
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
