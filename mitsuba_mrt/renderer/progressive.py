@@ -457,9 +457,9 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
             return
         begin, recorded = time.perf_counter(), recordings()
         _trace_pass(passes, tracer, xy, spp, launch, None if halves else launch % 2)
-        launch += 1
-        cost.add(spp, time.perf_counter() - begin, recordings() > recorded)
-        progress.trace_s += time.perf_counter() - begin
+        launch, seconds = launch + 1, time.perf_counter() - begin
+        cost.add(spp, seconds, recordings() > recorded)
+        progress.trace_s += seconds
         progress.spp = passes.count
 
 

@@ -536,6 +536,38 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
         assert passes.half_counts == [6, 5]
 
 
+def test_a_time_limit_alone_fills_its_time_after_one_launch(monkeypatch):
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.types import SparseTrace
+
+    clock = [0.0]
+    monkeypatch.setattr(progressive.time, "perf_counter", lambda: clock[0])
+    launched = []
+    @dataclass(frozen=True)
+    class Tracer:  # on the fake clock: 1 s a launch, and 1 s a sample per pixel
+        spp: int = 1
+        sensor = SimpleNamespace(sampler=lambda: "IndependentSampler[]")
+
+        def __call__(self, xy, **_):
+            launched.append(self.spp)
+            clock[0] += 1 + self.spp
+            n = len(xy)
+            return SparseTrace(np.full((n, 3), 0.5), np.full((n, 3), 0.5), np.ones(n, np.int64),
+                               np.zeros(n, np.uint32), 0, self.spp, 0.0,
+                               normal=np.zeros((n, 3)), variance=np.zeros((n, 3)))
+
+    _, _, progress = progressive.run_passes(
+        Tracer(), 2, 2, quality="fast", target_error=None, deadline=30.0, max_spp=64,
+        full_spp=16, area=1.0, denoise=False)
+    # 1 spp (2 s, replayed: a launch's cost), then at most 1 / 1.3 of what is left:
+    # 10 spp at 2 s each (11 s: the line is now 1 s + 1 s an spp), 12, then 2
+    assert launched == [1, 10, 12, 2] and clock[0] <= 30.0
+    assert progress.spp == 25 and progress.stopped == "the time limit"
+
+
 def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.types import SparseTrace
