@@ -455,11 +455,9 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
         spp = min(max_spp - passes.count, fits if any_spp else min(fits, 1))
         if spp < (2 if halves else 1):
             return
-        begin, recorded = time.perf_counter(), recordings()
-        _trace_pass(passes, tracer, xy, spp, launch, None if halves else launch % 2)
-        launch, seconds = launch + 1, time.perf_counter() - begin
-        cost.add(spp, seconds, recordings() > recorded)
-        progress.trace_s += seconds
+        progress.trace_s += _launch(passes, tracer, xy, spp, launch,
+                                    None if halves else launch % 2, cost)
+        launch += 1
         progress.spp = passes.count
 
 
@@ -473,11 +471,19 @@ def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int,
     launches = [(size, None if estimates else 0)] if split else [
         (1, 2 * k // size) for k in range(size)]
     for spp, half in launches:
-        begin, recorded = time.perf_counter(), recordings()
-        _trace_pass(passes, tracer, xy, spp, launch, half)
-        cost.add(spp, time.perf_counter() - begin, recordings() > recorded)
+        _launch(passes, tracer, xy, spp, launch, half, cost)
         launch += 1
     return launch
+
+
+def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half: int | None,
+            cost: LaunchCost) -> float:
+    """:func:`_trace_pass`, its seconds (returned) and whether it recorded added to ``cost``."""
+    begin, recorded = time.perf_counter(), recordings()
+    _trace_pass(passes, tracer, xy, spp, launch, half)
+    seconds = time.perf_counter() - begin
+    cost.add(spp, seconds, recordings() > recorded)
+    return seconds
 
 
 def run_passes(tracer, width: int, height: int, *, quality: str,

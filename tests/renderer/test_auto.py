@@ -491,11 +491,12 @@ def test_progress_hears_of_the_mrt_stages(variant):
     assert heard == ["trace", "reconstruct"]
 
 
-@pytest.mark.parametrize("halves, any_spp", [(False, False), (False, True), (True, True)],
-                         ids=["one spp a launch", "any spp", "halves in a launch"])
-def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatch, halves,
-                                                                      any_spp):
+@pytest.fixture
+def timed_tracer(monkeypatch):
+    """(Tracer class, its launches' spp): on a fake clock of the passes' module,
+    a launch takes 1 s and 1 s a sample per pixel, of an independent sampler."""
     from dataclasses import dataclass
+    from types import SimpleNamespace
 
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.types import SparseTrace
@@ -505,8 +506,9 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
     launched = []
 
     @dataclass(frozen=True)
-    class Tracer:  # on the fake clock: 1 s a launch, and 1 s a sample per pixel
+    class Tracer:
         spp: int = 1
+        sensor = SimpleNamespace(sampler=lambda: "IndependentSampler[]")
 
         def __call__(self, xy, **_):
             launched.append(self.spp)
@@ -517,6 +519,16 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
                                normal=np.zeros((n, 3)), variance=np.zeros((n, 3)),
                                odd=np.full((n, 3), 0.5))
 
+    return Tracer, launched, clock
+
+
+@pytest.mark.parametrize("halves, any_spp", [(False, False), (False, True), (True, True)],
+                         ids=["one spp a launch", "any spp", "halves in a launch"])
+def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(timed_tracer, halves,
+                                                                      any_spp):
+    from mitsuba_mrt.renderer import progressive
+
+    Tracer, launched, clock = timed_tracer
     xy = np.zeros((4, 2), dtype=np.int64)
     passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
     passes.add(Tracer(2)(xy), None if halves else 0, True)
@@ -536,29 +548,10 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(monkeypatc
         assert passes.half_counts == [6, 5]
 
 
-def test_a_time_limit_alone_fills_its_time_after_one_launch(monkeypatch):
-    from dataclasses import dataclass
-    from types import SimpleNamespace
-
+def test_a_time_limit_alone_fills_its_time_after_one_launch(timed_tracer):
     from mitsuba_mrt.renderer import progressive
-    from mitsuba_mrt.types import SparseTrace
 
-    clock = [0.0]
-    monkeypatch.setattr(progressive.time, "perf_counter", lambda: clock[0])
-    launched = []
-    @dataclass(frozen=True)
-    class Tracer:  # on the fake clock: 1 s a launch, and 1 s a sample per pixel
-        spp: int = 1
-        sensor = SimpleNamespace(sampler=lambda: "IndependentSampler[]")
-
-        def __call__(self, xy, **_):
-            launched.append(self.spp)
-            clock[0] += 1 + self.spp
-            n = len(xy)
-            return SparseTrace(np.full((n, 3), 0.5), np.full((n, 3), 0.5), np.ones(n, np.int64),
-                               np.zeros(n, np.uint32), 0, self.spp, 0.0,
-                               normal=np.zeros((n, 3)), variance=np.zeros((n, 3)))
-
+    Tracer, launched, clock = timed_tracer
     _, _, progress = progressive.run_passes(
         Tracer(), 2, 2, quality="fast", target_error=None, deadline=30.0, max_spp=64,
         full_spp=16, area=1.0, denoise=False)
