@@ -290,8 +290,11 @@ def final_quality(trace_s: float, fast_s: float, rate: float,
     ('high', 'fast')
     >>> final_quality(1.0, 0.1, 0.2, time_left=0.05)
     'fast'
+    >>> final_quality(0.01, 0.1, 0.2, high_s=0.05)
+    'high'
     """
-    extra = (HIGH_COST * fast_s if high_s is None else high_s) - fast_s
+    # (a first call's share can make ``fast``'s expected time the longer)
+    extra = max((HIGH_COST * fast_s if high_s is None else high_s) - fast_s, 0.0)
     if trace_s <= 0 or fast_s <= 0 or (time_left is not None and extra > time_left):
         return "fast"
     return "high" if (1 + extra / trace_s) ** -rate > HIGH_GAIN else "fast"
