@@ -51,7 +51,7 @@ from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
 from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
-from .progressive import FIRST_ROUND, Progress, needed_spp, run_passes
+from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings
 from .scene_query import environment_map, lit_diffuse_by_points, textured_diffuse_shapes
 
@@ -141,6 +141,9 @@ PASS_OVER_GRID = 0.75
 #: in this process whose kernels were all replayed: what tells a limit too
 #: short for one pass and OIDN before a pass is traced.
 _first_round_s: dict = {}
+#: The passes' launches (:class:`~.progressive.LaunchCost`), per traced
+#: objects and pixel count: what the next render's passes plan from.
+_launch_costs: dict = {}
 
 
 @dataclass
@@ -271,7 +274,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=max_spp, full_spp=spp, area=area,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round,
-        surfaces=surfaces)
+        surfaces=surfaces, cost=_launch_costs.setdefault(key, LaunchCost()))
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,

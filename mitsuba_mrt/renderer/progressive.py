@@ -79,6 +79,19 @@ HIGH_COST, HIGH_GAIN = 1.9, 0.96
 ESTIMATE_CLIP = 1.0
 
 
+#: Launches a :class:`LaunchCost` keeps (the last): an earlier render's
+#: launches tell the next one's line (a time-limited render's launches
+#: alone, 1 spp then a few large ones, rarely give it two sizes), and
+#: fewer are enough for the line and keep one slow launch from holding it up
+#: for long.
+KEPT_LAUNCHES = 8
+
+#: A 1-spp launch's share that is its fixed part, until a launch of more
+#: spp measures it (0.1-0.7 on the gallery at 256 px): where it is less, a
+#: launch of k spp takes at most 1 / (1 - this) times what the line says,
+#: about the fill's :data:`ROUND_SAFETY`.
+ONE_SIZE_FIXED = 0.25
+
 #: Whether the passes denoise the textured diffuse surfaces as their shading
 #: (:attr:`Passes.shading`; ``examples/auto_choices.py`` turns it off to
 #: measure what it gives).
@@ -378,31 +391,34 @@ class LaunchCost:
     records anew, which adds :attr:`record_s`.
 
     A launch's fixed part (its kernels' start, reading every pixel back)
-    makes a 1-spp launch cost about two of a larger launch's spp; with one
-    size measured the line goes through 0 (every spp costs what that
-    launch's did: more than a larger launch takes).
+    makes a 1-spp launch cost about two of a larger launch's spp; with only
+    1-spp launches measured it is taken as :data:`ONE_SIZE_FIXED` of theirs
+    (so that a larger launch is tried, and measures the line), with another
+    single size measured as 0 (every spp costs what that launch's did).
 
     Examples
     --------
     >>> cost = LaunchCost()
-    >>> cost.add(1, 0.036, recorded=True); cost.add(1, 0.018); round(cost(4), 3)
-    0.09
+    >>> cost.add(1, 0.036, recorded=True); cost.add(1, 0.018); round(cost(4), 4)
+    0.0765
     >>> round(cost.record_s, 3), cost.fits(0.05), cost.fits(0.07)
-    (0.018, 1, 2)
+    (0.018, 2, 3)
     >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
     (0.078, 3)
 
-    A recorded launch's time bounds what recording adds, not the line:
+    A recorded launch's time tells what recording adds, not the line:
 
-    >>> cost = LaunchCost([(1, 0.045, True), (1, 0.020, False), (4, 0.050, True)])
+    >>> cost = LaunchCost([(1, 0.045, True), (1, 0.020, False), (2, 0.040, True)])
     >>> round(cost.record_s, 3), cost.fits(0.1)
-    (0.025, 4)
+    (0.005, 6)
     """
 
     launches: list = field(default_factory=list)
 
     def add(self, spp: int, seconds: float, recorded: bool = False) -> None:
+        """Add a launch; only the last :data:`KEPT_LAUNCHES` are kept."""
         self.launches.append((int(spp), float(seconds), bool(recorded)))
+        del self.launches[:-KEPT_LAUNCHES]
 
     def _line(self) -> tuple[float, float]:
         """(fixed, per_spp) of a replayed launch: through the replayed
@@ -412,20 +428,21 @@ class LaunchCost:
         if not points:
             return 0.0, 0.0
         spp, seconds = (np.array(v, dtype=float) for v in zip(*points))
-        fixed = 0.0
+        fixed = ONE_SIZE_FIXED * float(seconds.min()) if set(spp) == {1} else 0.0
         if len(set(spp)) > 1:
             fixed = float(np.clip(np.polyfit(spp, seconds, 1)[1], 0.0, seconds.min()))
         return fixed, float(((seconds - fixed) / spp).max())
 
     @property
     def record_s(self) -> float:
-        """What recording adds to a launch: the most a recorded launch took
-        beyond the line (0 where no launch, or every launch, recorded)."""
+        """What recording adds to a launch: what the last recorded launch took
+        beyond the line (0 where no launch, or every launch, recorded); the
+        first launch of a process also pays for first uses, once."""
         if all(recorded for _, _, recorded in self.launches):
             return 0.0
         fixed, per_spp = self._line()
-        return max([t - fixed - per_spp * s for s, t, recorded in self.launches if recorded]
-                   + [0.0])
+        excess = [t - fixed - per_spp * s for s, t, recorded in self.launches if recorded]
+        return max(excess[-1], 0.0) if excess else 0.0
 
     def __call__(self, spp: int) -> float:
         """Seconds a launch of ``spp`` is expected to take (recorded anew
@@ -492,8 +509,8 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
 def run_passes(tracer, width: int, height: int, *, quality: str,
                target_error: float | None, deadline: float | None, max_spp: int,
                full_spp: int, area: float, denoise: bool = True,
-               stop_early=None, on_round=None,
-               surfaces: tuple | None = None) -> tuple[np.ndarray, np.ndarray, Progress]:
+               stop_early=None, on_round=None, surfaces: tuple | None = None,
+               cost: LaunchCost | None = None) -> tuple[np.ndarray, np.ndarray, Progress]:
     """Trace passes until the target, the deadline or ``max_spp``; return
     (image (height, width, 3), alpha (height, width), :class:`Progress`).
 
@@ -509,7 +526,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     pixel's shape index, and per shape index whether it is a textured
     diffuse surface: :func:`~.scene_query.textured_diffuse_shapes`) lets
     the last OIDN call denoise the textured pixels as their shading
-    (:attr:`Passes.shading`).
+    (:attr:`Passes.shading`).  ``cost`` holds the launches of earlier
+    renders of the same objects and image size (a launch of an spp among
+    them is taken to replay), and gets this render's.
     """
     xy = every_pixel(width, height)
     n = len(xy)
@@ -520,21 +539,23 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     if target_error is None and deadline is None:  # the default target
         round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
                          max_spp)
-    # A time limit alone needs no estimates: the passes fill the time, from 1
-    # spp on, in one half, and leave the last OIDN call its expected time
-    final, quality = quality, preset(quality)  # (the estimates' preset)
-    estimates = not (deadline is not None and target_error is None)
-    if not estimates:
-        round_size = 1
-        oidn_px = expected_seconds(n, quality) / n if denoise else 0.0
-    passes.guide_spp = max(GUIDE_PASSES, round_size)
     # a round is one launch, its halves its odd and even samples: a single
     # launch keeps a stratifying sampler's strata whole (two launches of half
     # the spp gave 1.3-1.6x the error of one on such scenes); under a deadline
     # a sampler that compiles kernels per spp traces every pass at 1 spp
     # instead (a new spp's compilation would overrun it), a half a launch
     split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
-    cost = LaunchCost()
+    cost = LaunchCost() if cost is None else cost
+    # A time limit alone needs no estimates: the passes fill the time, in one
+    # half, and leave the last OIDN call its expected time; the first launch
+    # is of 1 spp, or as large as earlier renders' launches say fits
+    final, quality = quality, preset(quality)  # (the estimates' preset)
+    estimates = not (deadline is not None and target_error is None)
+    if not estimates:
+        oidn_px = expected_seconds(n, quality) / n if denoise else 0.0
+        fits = cost.fits((deadline - time.perf_counter() - oidn_px * n) / ROUND_SAFETY)
+        round_size = min(max(fits, 1), max_spp) if split else 1
+    passes.guide_spp = max(GUIDE_PASSES, round_size)
     while True:
         begin = time.perf_counter()
         launch = _trace_round(passes, tracer, xy, round_size, launch, split, estimates, cost)
@@ -575,10 +596,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             progress.stopped = f"reached {passes.count} spp"
             break
         # without estimates nothing is learnt from rounds: once a launch was
-        # replayed (the first, if it recorded, is not a launch's cost), the
-        # passes fill the time at once
+        # replayed (here or by an earlier render: the first, if it recorded,
+        # is not a launch's cost), the passes fill the time at once
         round_s = cost(next_size) if split else next_size * cost(1)
-        measured = passes.count >= FIRST_ROUND or not cost.launches[-1][2]
+        measured = passes.count >= FIRST_ROUND or not all(r for _, _, r in cost.launches)
         if deadline is not None and ((not estimates and measured) or time.perf_counter()
                                      + ROUND_SAFETY * round_s + oidn_px * n > deadline):
             progress.stopped = "the time limit"
