@@ -50,6 +50,9 @@ else:
 
 def _child(scene: str, mode: str, defines: dict, cold: bool) -> dict:
     env = dict(os.environ)
+    # as a user's Python: the package's modules compiled once, their bytecode
+    # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     with tempfile.TemporaryDirectory() as home:
         if cold:
             env["HOME"] = home

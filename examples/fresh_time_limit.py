@@ -6,12 +6,14 @@
 Per gallery scene at 256 x 256: the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
 rendering once with ``time_limit``.  Printed: each render's seconds over its
-limit and the plan it chose.  Kernels come from Dr.Jit's disk cache (run it
-twice after a change of the trace kernels: the first run fills the cache);
-the process has no earlier render to learn OIDN's or a pass's cost from.
+limit and the plan it chose.  Kernels come from Dr.Jit's disk cache and
+modules from Python's bytecode cache, as for a user (run it twice after a
+change: the first run fills both); the process has no earlier render to
+learn OIDN's or a pass's cost from.
 """
 
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -38,8 +40,12 @@ else:
 
 
 def _child(path: Path, limit: str) -> dict:
+    env = dict(os.environ)
+    # as a user's Python: the package's modules compiled once, their bytecode
+    # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit],
-                         capture_output=True, text=True, check=True)
+                         env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

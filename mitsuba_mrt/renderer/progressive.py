@@ -61,9 +61,10 @@ GUIDE_PASSES = 4
 #: Passes before an estimate may say the target is met: 1 spp against 1
 #: spp is the noisiest estimate, and a firefly can make it say 0.
 MIN_SPP_MET = 4
-#: A round's predicted time is its passes' at the last round's rate times this:
-#: a launch of a new spp is recorded before it is replayed, which costs more.
-ROUND_SAFETY = 1.3
+#: A launch is planned to take at most the time left over this
+#: (:class:`LaunchCost` counts a recording's extra; this is for the machine's
+#: noise and the line's error).
+ROUND_SAFETY = 1.15
 #: Strips of rows the error is estimated on (a quarter of the image's rows),
 #: and the most pixels they hold in all (a 256 x 256 image's quarter): more
 #: would cost the rounds' OIDN calls without making the estimate surer.
@@ -88,8 +89,9 @@ KEPT_LAUNCHES = 8
 
 #: A 1-spp launch's share that is its fixed part, until a launch of more
 #: spp measures it (0.1-0.7 on the gallery at 256 px): where it is less, a
-#: launch of k spp takes at most 1 / (1 - this) times what the line says,
-#: about the fill's :data:`ROUND_SAFETY`.
+#: launch of k spp takes up to 1 / (1 - this) times what the line says
+#: (``spot_textures``, 0.11: 1.16 times at 4 spp), and one such launch
+#: measures the line.
 ONE_SIZE_FIXED = 0.25
 
 #: Whether the passes denoise the textured diffuse surfaces as their shading

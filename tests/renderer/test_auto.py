@@ -536,16 +536,17 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(timed_trac
     start = clock[0]
     progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
                       max_spp=64, launch=1, halves=halves, any_spp=any_spp)
-    # 13 s left, a launch at most 1 / 1.3 of what is left (the safety): 9 spp
-    # (10 s), then 1 (2 s) where one spp a launch is not asked, 2 where halves
-    # are (none); or 1-spp launches of 2 s while 2.6 s are left (6 of them)
-    expected = {(False, False): [1] * 6, (False, True): [9, 1], (True, True): [9]}
+    # 13 s left, a launch at most 1 / 1.15 of what is left (the safety): 10 spp
+    # (11 s), then none (2 s left, 1.74 s with the safety); or 1-spp launches of
+    # 2 s while 2.3 s are left (6 of them)
+    assert progressive.ROUND_SAFETY == 1.15
+    expected = {(False, False): [1] * 6, (False, True): [10], (True, True): [10]}
     assert launched[1:] == expected[halves, any_spp] and clock[0] <= start + 13.0
     assert passes.count == 2 + sum(launched[1:]) and progress.spp == passes.count
     assert cost.launches[2:] == [(s, 1.0 + s, False) for s in launched[1:]]
     # halves from a launch's odd and even samples are as large as each other
     if halves:
-        assert passes.half_counts == [6, 5]
+        assert passes.half_counts == [6, 6]
 
 
 def test_a_time_limit_alone_fills_its_time_after_one_launch(timed_tracer):
@@ -556,9 +557,9 @@ def test_a_time_limit_alone_fills_its_time_after_one_launch(timed_tracer):
         Tracer(), 2, 2, quality="fast", target_error=None, deadline=30.0, max_spp=64,
         full_spp=16, area=1.0, denoise=False)
     # 1 spp (2 s, replayed: a launch's cost, a quarter of it taken as fixed), then
-    # at most 1 / 1.3 of what is left: 14 spp at 1.5 s each (15 s: the line is now
-    # 1 s + 1 s an spp), 8 (9 s of 10: the fitted line rounds a hair above 1 s), 2
-    assert launched == [1, 14, 8, 2] and clock[0] <= 30.0
+    # at most 1 / 1.15 of what is left: 15 spp at 1.5 s each (16 s: the line is now
+    # 1 s + 1 s an spp), 9 (10 s of 12), and 2 s left hold no launch
+    assert launched == [1, 15, 9] and clock[0] <= 30.0
     assert progress.spp == 25 and progress.stopped == "the time limit"
 
 
@@ -574,8 +575,8 @@ def test_a_time_limit_s_first_launch_is_sized_by_earlier_renders_launches(timed_
                                deadline=30.0, max_spp=64, full_spp=16, area=1.0,
                                denoise=False, cost=cost)
         assert clock[0] <= 30.0
-    # the second knows the line (1 s + 1 s an spp): 30 / 1.3 holds 22 spp at once
-    assert launched[0] == 22 and sum(launched) >= 25
+    # the second knows the line (1 s + 1 s an spp): 30 / 1.15 holds 25 spp at once
+    assert launched[0] == 25 and sum(launched) >= 25
 
 
 def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
