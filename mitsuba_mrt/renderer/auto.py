@@ -325,6 +325,10 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     end = started + PREVIEW_SLACK * limit
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
+    launches = _launch_costs.get(key)
+    if first_s is None and launches is not None and launches.replayed:
+        # earlier passes measured a pass (a probe can record its kernels anew)
+        first_s = time.perf_counter() - started + launches(1)
     if first_s is not None:
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         return (AutoOutcome(preview) if due else None), None, False

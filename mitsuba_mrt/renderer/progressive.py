@@ -436,11 +436,16 @@ class LaunchCost:
         return fixed, float(((seconds - fixed) / spp).max())
 
     @property
+    def replayed(self) -> bool:
+        """Whether some launch replayed its kernels (the line is a launch's cost)."""
+        return not all(recorded for _, _, recorded in self.launches)
+
+    @property
     def record_s(self) -> float:
         """What recording adds to a launch: what the last recorded launch took
         beyond the line (0 where no launch, or every launch, recorded); the
         first launch of a process also pays for first uses, once."""
-        if all(recorded for _, _, recorded in self.launches):
+        if not self.replayed:
             return 0.0
         fixed, per_spp = self._line()
         excess = [t - fixed - per_spp * s for s, t, recorded in self.launches if recorded]
@@ -601,7 +606,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         # replayed (here or by an earlier render: the first, if it recorded,
         # is not a launch's cost), the passes fill the time at once
         round_s = cost(next_size) if split else next_size * cost(1)
-        measured = passes.count >= FIRST_ROUND or not all(r for _, _, r in cost.launches)
+        measured = passes.count >= FIRST_ROUND or cost.replayed
         if deadline is not None and ((not estimates and measured) or time.perf_counter()
                                      + ROUND_SAFETY * round_s + oidn_px * n > deadline):
             progress.stopped = "the time limit"

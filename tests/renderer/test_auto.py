@@ -315,6 +315,18 @@ def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scen
     assert plan.choice.error is None and result.timings.check == 0.0
 
 
+def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, monkeypatch):
+    first = mitsuba_mrt.render(scene, time_limit=10.0)  # passes: their launches are kept
+    assert first.auto.choice.kind == "denoised"
+    monkeypatch.setattr(auto, "_first_round_s", {})  # no first round's time to go by
+
+    def probe(*args):
+        raise AssertionError("the grid was probed")
+    monkeypatch.setattr(auto, "_grid_probe", probe)
+    again = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert again.auto.choice.kind == "denoised"
+
+
 def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
     chosen = mitsuba_mrt.render(scene).auto.choice
     assert chosen.kind == "denoised" and chosen.quality in ("fast", "high")
