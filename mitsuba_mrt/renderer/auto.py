@@ -144,8 +144,10 @@ PASS_OVER_GRID = 0.75
 #: short for one pass and OIDN before a pass is traced.
 _first_round_s: dict = {}
 #: The passes' launches (:class:`~.progressive.LaunchCost`), per traced
-#: objects and pixel count: what the next render's passes plan from.
+#: objects and pixel count, of the last :data:`KEPT_COSTS` such keys: what
+#: the next render's passes plan from.
 _launch_costs: dict = {}
+KEPT_COSTS = 16
 
 
 @dataclass
@@ -276,7 +278,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=max_spp, full_spp=spp, area=area,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round,
-        surfaces=surfaces, cost=_launch_costs.setdefault(key, LaunchCost()))
+        surfaces=surfaces, cost=_kept_cost(key))
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
@@ -313,6 +315,16 @@ def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, note
     pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
     return AutoOutcome(Plan(replace(chosen[0], spp=tracer.spp), chosen[1], pilot_s=pilot_s,
                             notes=notes), check=True, id_pass=id_pass), id_pass
+
+
+def _kept_cost(key: tuple) -> LaunchCost:
+    """The launches kept for ``key`` (new where there are none), now the
+    most recently used of :data:`_launch_costs`."""
+    cost = _launch_costs.pop(key, None) or LaunchCost()
+    _launch_costs[key] = cost
+    for old in list(_launch_costs)[:-KEPT_COSTS]:
+        del _launch_costs[old]
+    return cost
 
 
 def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
