@@ -542,7 +542,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     rows = estimate_rows(height, width)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     passes, progress, launch = Passes(crop), Progress(), 0
-    round_size, pass_s, oidn_px = FIRST_ROUND, 0.0, 0.0
+    round_size, pass_s, oidn_s = FIRST_ROUND, 0.0, 0.0
     if target_error is None and deadline is None:  # the default target
         round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
                          max_spp)
@@ -559,8 +559,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not (deadline is not None and target_error is None)
     if not estimates:
-        oidn_px = expected_seconds(n, quality) / n if denoise else 0.0
-        fits = cost.fits((deadline - time.perf_counter() - oidn_px * n) / ROUND_SAFETY)
+        oidn_s = expected_seconds(n, quality) if denoise else 0.0
+        fits = cost.fits((deadline - time.perf_counter() - oidn_s) / ROUND_SAFETY)
         round_size = min(max(fits, 1), max_spp) if split else 1
     passes.guide_spp = max(GUIDE_PASSES, round_size)
     while True:
@@ -584,7 +584,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             begin = time.perf_counter()
             _estimate(passes, progress, width, quality, full_spp, area, denoise)
             # OIDN's cost on the whole image, from the estimate's call (and earlier ones)
-            oidn_px = expected_seconds(n, quality) / n if denoise else 0.0
+            oidn_s = expected_seconds(n, quality) if denoise else 0.0
             progress.estimate_s += time.perf_counter() - begin
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
@@ -608,20 +608,19 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         round_s = cost(next_size) if split else next_size * cost(1)
         measured = passes.count >= FIRST_ROUND or cost.replayed
         if deadline is not None and ((not estimates and measured) or time.perf_counter()
-                                     + ROUND_SAFETY * round_s + oidn_px * n > deadline):
+                                     + ROUND_SAFETY * round_s + oidn_s > deadline):
             progress.stopped = "the time limit"
             # the passes fill what the last OIDN call leaves of the time
-            left = max(deadline - time.perf_counter() - oidn_px * n, 0.0)
-            final = _final_preset(final, progress, progress.trace_s + left, oidn_px * n, left, n)
-            _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_px * n, n),
+            left = max(deadline - time.perf_counter() - oidn_s, 0.0)
+            final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
+            _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
                   cost, max_spp, launch, halves=split and estimates, any_spp=split)
             break
         round_size = next_size
     image = passes.mean
     if denoise:
-        left = None if deadline is None else deadline - time.perf_counter() - oidn_px * n
-        progress.quality = _final_preset(final, progress, progress.trace_s, oidn_px * n, left,
-                                         n)
+        left = None if deadline is None else deadline - time.perf_counter() - oidn_s
+        progress.quality = _final_preset(final, progress, progress.trace_s, oidn_s, left, n)
         begin = time.perf_counter()
         progress.shading = passes.shading and passes.guides == passes.count
         image = passes.denoised(image, slice(None), (height, width, 3), progress.quality,
