@@ -4,8 +4,8 @@ The alternative: every pixel at a few spp with a box pixel filter, through
 Intel Open Image Denoise with albedo and normal guides from the same
 samples, along an spp ladder at OIDN's ``fast`` and ``high`` presets (its
 time-error curve: at each time the lower of the two).  Per scene this
-experiment measures, warm and alternating in one process (median of the
-repeats): the full render at the scene's spp (time 1), the alternative's
+experiment measures, warm and alternating in one process, each round of
+repeats with its own seed (times: the median; errors: the mean): the full render at the scene's spp (time 1), the alternative's
 ladder, the default ``auto``, ``auto`` under time limits of
 :data:`LIMITS` of the full render, and each MRT configuration.  Errors are
 against converged renders (:data:`CONVERGED_SPP`): the film's own filter
@@ -112,49 +112,74 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
 
     def alternative(s, quality):
-        return lambda: render_denoised(scene, spp=s, quality=quality)
+        return lambda seed: render_denoised(scene, spp=s, quality=quality, seed=seed)
 
-    methods = {"full": lambda: render_reference(scene, spp=spp)}
+    methods = {"full": lambda seed: render_reference(scene, spp=spp, seed=seed)}
     for quality, prefix in ALTERNATIVE.items():
         methods.update({f"{prefix}{s}": alternative(s, quality) for s in ladder})
-    methods["auto"] = lambda: render(scene, mode="auto")
+    methods["auto"] = lambda seed: render(scene, mode="auto", seed=seed)
     for m, d in CONFIGS:
         methods[f"{m}+{d}" if d != "none" else m] = (
-            lambda m=m, d=d: render(scene, mode=m, denoise=d))
-    outputs, times = {}, {k: [] for k in methods}
-    for k, run in methods.items():  # warm-up: kernels compiled, caches filled
-        outputs[k] = run()
-    for _ in range(repeats):  # alternating rounds
+            lambda seed, m=m, d=d: render(scene, mode=m, denoise=d, seed=seed))
+    times = {k: [] for k in methods}
+    scores = {k: [] for k in methods}
+    for run in methods.values():  # warm-up: kernels compiled, caches filled
+        run(0)
+    for seed in range(repeats):  # alternating rounds, each with its own seed
         for k, run in methods.items():
             begin = time.perf_counter()
-            outputs[k] = run()
+            out = run(seed)
             times[k].append(time.perf_counter() - begin)
+            scores[k].append(_score(k, out, spp, truth))
     full_s = statistics.median(times["full"])
     for share in LIMITS:  # each limit is relative to this process's full render
         key = f"auto --time-limit {share}"
-        runs = []
-        for _ in range(max(repeats, 1)):
+        times[key], scores[key] = [], []
+        for seed in range(max(repeats, 1)):
             begin = time.perf_counter()
-            out = render(scene, mode="auto", time_limit=share * full_s)
-            runs.append(time.perf_counter() - begin)
-        outputs[key], times[key] = out, runs
+            out = render(scene, mode="auto", time_limit=share * full_s, seed=seed)
+            times[key].append(time.perf_counter() - begin)
+            scores[key].append(_score(key, out, spp, truth))
     rows = []
-    for k, out in outputs.items():
-        if isinstance(out, tuple):  # render_reference's, render_denoised's
-            image, used = out[0], "full+oidn" if _alternative(k) else "full"
-        else:
-            image, used = out.image, out.mode_used
-        kind = "box" if used == "full+oidn" else "film"
+    for k, runs in scores.items():
         seconds = statistics.median(times[k])
-        chose = ""
-        if not isinstance(out, tuple) and out.auto is not None:
-            chose = out.auto.choice.label
-        spp_used = int(k.split("@")[1]) if _alternative(k) else (
-            spp if k == "full" else int(out.spp))
-        rows.append(Row(name, k, spp_used, seconds,
-                        seconds / full_s, paper_error(image, truth[kind]),
-                        rel_mse(image, truth[kind]), chose, flip_error(image, truth[kind])))
+        chose, spp_used = _most_common([(s[3], s[4]) for s in runs])
+        error, mse, flip = (float(np.mean([s[j] for s in runs])) for j in range(3))
+        rows.append(Row(name, k, spp_used, seconds, seconds / full_s, error, mse, chose, flip))
     return rows
+
+
+def _score(method: str, out, spp: int, truth: dict) -> tuple:
+    """(error, relMSE, FLIP, the plan ``auto`` chose, spp) of one render's
+    ``out`` against ``truth`` (the converged renders, film and box filter)."""
+    if isinstance(out, tuple):  # render_reference's, render_denoised's
+        image, used = out[0], "full+oidn" if _alternative(method) else "full"
+    else:
+        image, used = out.image, out.mode_used
+    reference = truth["box" if used == "full+oidn" else "film"]
+    chose = ""
+    if not isinstance(out, tuple) and out.auto is not None:
+        chose = out.auto.choice.label
+    spp_used = int(method.split("@")[1]) if _alternative(method) else (
+        spp if method == "full" else int(out.spp))
+    return (paper_error(image, reference), rel_mse(image, reference),
+            flip_error(image, reference), chose, spp_used)
+
+
+def _most_common(choices: list[tuple[str, int]]) -> tuple[str, int]:
+    """The (plan, spp) most of the repeats took, the plan's label saying
+    how many took it where they differ (``"... (2 of 3)"``).
+
+    Examples
+    --------
+    >>> _most_common([("a", 8), ("b", 16), ("a", 8)])
+    ('a (2 of 3)', 8)
+    """
+    best = max(set(choices), key=lambda c: (choices.count(c), -choices.index(c)))
+    count = choices.count(best)
+    label = best[0] if count == len(choices) or not best[0] else (
+        f"{best[0]} ({count} of {len(choices)})")
+    return label, best[1]
 
 
 def at_time(rows: list[Row], prefix: str, seconds: float, metric: str = "error",
