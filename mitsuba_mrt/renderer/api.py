@@ -98,7 +98,8 @@ class GridTracer:
     seed stream offset from ``seed``.  ``id_pass``: the image's id pass
     (every pixel, :data:`~mitsuba_mrt.types.SeedStream.ID_PASS`, AOVs
     alone), where ``auto`` has traced it already: the call that asks for
-    it again gets it."""
+    it again gets it.  ``independent``: sample with Mitsuba's
+    ``independent`` sampler instead of the sensor's."""
 
     scene: mi.Scene
     sensor: mi.Sensor
@@ -106,6 +107,7 @@ class GridTracer:
     spp: int
     seed: int
     id_pass: SparseTrace | None = None
+    independent: bool = False
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
@@ -117,7 +119,7 @@ class GridTracer:
             return known
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
                             self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
-                            albedo, halves)
+                            albedo, halves, self.independent)
 
 
 def _check_spp(spp: int | None) -> int | None:
