@@ -98,8 +98,7 @@ class GridTracer:
     seed stream offset from ``seed``.  ``id_pass``: the image's id pass
     (every pixel, :data:`~mitsuba_mrt.types.SeedStream.ID_PASS`, AOVs
     alone), where ``auto`` has traced it already: the call that asks for
-    it again gets it.  ``independent``: sample with Mitsuba's
-    ``independent`` sampler instead of the sensor's."""
+    it again gets it."""
 
     scene: mi.Scene
     sensor: mi.Sensor
@@ -107,7 +106,6 @@ class GridTracer:
     spp: int
     seed: int
     id_pass: SparseTrace | None = None
-    independent: bool = False
 
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
@@ -119,7 +117,7 @@ class GridTracer:
             return known
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
                             self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
-                            albedo, halves, self.independent)
+                            albedo, halves)
 
 
 def _check_spp(spp: int | None) -> int | None:

@@ -24,7 +24,7 @@ import numpy as np
 from .lanes import is_jit, logical_not
 from .pixel_filter import filter_table
 from .replay import Replay
-from .scene_query import has_delta_lobes, independent_sampler
+from .scene_query import has_delta_lobes
 
 #: Specular (mirror) bounces followed: by a sample's albedo (:func:`_albedo_along`)
 #: and by the id trace (:mod:`.ids`).
@@ -230,8 +230,7 @@ def _aligned_float(values: np.ndarray):
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
-                 box=False, sources=None, halves=False, normals=True, albedo_samples=0,
-                 independent=False):
+                 box=False, sources=None, halves=False, normals=True, albedo_samples=0):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -248,9 +247,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     ``albedo_samples`` (not where the samples are splatted or a filter's
     negative lobe weighs them -1), only each pixel's first that many samples
     trace the albedo, and ``albedo_varies`` says whether they disagreed (or
-    some missed every surface).  With ``independent`` the kernels sample with
-    Mitsuba's ``independent`` sampler instead of the sensor's (whose
-    arithmetic may bake the spp in: :func:`.scene_query.sampler_bakes_spp`).
+    some missed every surface).
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -270,7 +267,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
               float(table.radius), len(table.pdf), bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
-              bool(albedo and normals), few, bool(independent))
+              bool(albedo and normals), few)
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
@@ -305,11 +302,11 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     a second kernel over every lane to write back.
     """
     (n, spp, _, albedo, every, splat, width, height, crop_offset, sample_border, radius, cells,
-     box, bounces, halves, normals, few, independent) = layout
+     box, bounces, halves, normals, few) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
     cell = 2.0 * radius / cells
-    sampler = independent_sampler() if independent else sensor.sampler().clone()
+    sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
@@ -497,11 +494,10 @@ def box_filter():
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
                     replay=False, box=False, sources=None, halves=False, normals=True,
-                    albedo_samples=0, independent=False):
+                    albedo_samples=0):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python
     (the normals are developed whatever ``normals`` says, and every sample's
-    albedo whatever ``albedo_samples`` says), with ``sampler`` itself (the
-    caller's choice, whatever ``independent`` says)."""
+    albedo whatever ``albedo_samples`` says)."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     rfilter = box_filter() if box else film.rfilter()

@@ -42,7 +42,7 @@ from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..types import SeedStream
 from .replay import recordings
-from .scene_query import sampler_bakes_spp, sampler_jitters
+from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
 FIRST_ROUND = 2
@@ -529,8 +529,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.  Under a deadline, a
     sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
-    gives way to Mitsuba's ``independent`` sampler, or, where it does not
-    jitter, traces every pass at 1 spp, in as many launches.  ``surfaces`` (each
+    traces every pass at 1 spp, in as many launches.  ``surfaces`` (each
     pixel's shape index, and per shape index whether it is a textured
     diffuse surface: :func:`~.scene_query.textured_diffuse_shapes`) lets
     the last OIDN call denoise the textured pixels as their shading
@@ -550,15 +549,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # a round is one launch, its halves its odd and even samples: a single
     # launch keeps a stratifying sampler's strata whole (two launches of half
     # the spp gave 1.3-1.6x the error of one on such scenes); under a deadline
-    # a sampler that compiles kernels per spp (a new spp's compilation would
-    # overrun it) gives way to the independent sampler, whose kernels take
-    # any spp: its passes would be launches of 1 spp, strata of one sample
-    # each, and so independent samples anyway; one that does not jitter (its
-    # samples the same on every launch) traces every pass at 1 spp, a half a launch
-    sampler = tracer.sensor.sampler()
-    if deadline is not None and sampler_bakes_spp(sampler) and sampler_jitters(sampler):
-        tracer = replace(tracer, independent=True)
-    split = deadline is None or not sampler_bakes_spp(sampler) or tracer.independent
+    # a sampler that compiles kernels per spp traces every pass at 1 spp
+    # instead (a new spp's compilation would overrun it), a half a launch
+    split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
     cost = LaunchCost() if cost is None else cost
     # A time limit alone needs no estimates: the passes fill the time, in one
     # half, and leave the last OIDN call its expected time; the first launch

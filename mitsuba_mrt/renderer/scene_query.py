@@ -47,19 +47,6 @@ def sampler_bakes_spp(sampler: mi.Sampler) -> bool:
     return not str(sampler).startswith("IndependentSampler")
 
 
-def sampler_jitters(sampler: mi.Sampler) -> bool:
-    """Whether ``sampler`` draws random numbers (all of Mitsuba's but one
-    whose ``jitter`` is off: its samples are the strata's centres, the same
-    from every seed)."""
-    return "jitter = 0" not in str(sampler)
-
-
-def independent_sampler() -> mi.Sampler:
-    """A new ``independent`` sampler: its samples' arithmetic takes the spp
-    as an input, whatever the scene's sampler bakes in."""
-    return mi.load_dict({"type": "independent"})
-
-
 def set_sample_count(sampler: mi.Sampler, spp: int) -> int:
     """Set ``sampler`` to ``spp`` samples per pixel; return the count it takes
     (``stratified`` and ``multijitter`` round up to a square), without the

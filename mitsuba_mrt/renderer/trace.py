@@ -23,9 +23,8 @@ from .ids import _ids_jit, _ids_scalar
 from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
-from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices,
-                          independent_sampler, replayable, set_sample_count, shadow_rule,
-                          shape_albedos, tracked_lights)
+from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices, replayable,
+                          set_sample_count, shadow_rule, shape_albedos, tracked_lights)
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.  Dark
@@ -42,8 +41,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True, replay: bool = False,
                  pad: bool = False, box: bool = False, ids: bool = True,
-                 albedo: bool = True, halves: bool = False,
-                 independent: bool = False) -> SparseTrace:
+                 albedo: bool = True, halves: bool = False) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -94,10 +92,6 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         Also the mean radiance of each pixel's odd-numbered samples
         (``odd``): with the even-numbered ones, two estimates of the pixel
         from one launch (independent for the ``independent`` sampler).
-    independent : bool
-        Sample with Mitsuba's ``independent`` sampler instead of the
-        sensor's: a new spp then replays the same kernels, whatever the
-        scene's sampler (:func:`.scene_query.sampler_bakes_spp`).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -106,11 +100,11 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     if pad and n and is_jit() and replay_active() and replayable(scene):
         return trace_pixels(scene, sensor, integrator, _padded(pixel_xy), spp, seed, aovs,
                             radiance, replay=True, box=box, ids=ids, albedo=albedo,
-                            halves=halves, independent=independent).take(slice(0, n))
+                            halves=halves).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
-    sampler = independent_sampler() if independent else sensor.sampler().clone()
+    sampler = sensor.sampler().clone()
     spp = set_sample_count(sampler, spp)
     replay = replay and is_jit() and replayable(scene)
     zero = np.zeros(n, np.int64)
@@ -118,7 +112,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     one_colour = aovs and albedo_per_shape(scene)
     if radiance:
         samples = _samples(develop, scene, sensor, integrator, sampler, pixel_xy, spp, seed,
-                           aovs and albedo, replay, box, halves, ids, one_colour, independent)
+                           aovs and albedo, replay, box, halves, ids, one_colour)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal, back = (_ids_jit if is_jit() else _ids_scalar)(
@@ -152,7 +146,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
 
 def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, spp: int,
              seed: int, albedo: bool, replay: bool, box: bool, halves: bool,
-             ids: bool, one_colour: bool, independent: bool = False) -> _Developed:
+             ids: bool, one_colour: bool) -> _Developed:
     """The developed samples of ``pixel_xy``, their albedo (with ``albedo``)
     from as few samples as it needs: where every shape's albedo is one colour
     (``one_colour``: :func:`.scene_query.albedo_per_shape`) and the ids give
@@ -162,15 +156,14 @@ def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, 
     few = (ALBEDO_FIRST_SAMPLES if one_colour and albedo and ids and not halves and is_jit()
            else 0)
     samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                      replay, box, halves=halves, normals=not ids, albedo_samples=few,
-                      independent=independent)
+                      replay, box, halves=halves, normals=not ids, albedo_samples=few)
     if spp <= few or samples.albedo_varies is None or not samples.albedo_varies.any():
         return samples  # (every sample traced its albedo, or they all agreed)
     again = np.flatnonzero(samples.albedo_varies)
     xy = _padded(pixel_xy[again]) if replay and replay_active() else pixel_xy[again]
     samples.albedo[again] = develop(scene, sensor, None, sampler, xy, spp,
                                     (seed + RETRACE_SEED) & 0xFFFFFFFF, True, replay, box,
-                                    normals=False, independent=independent).albedo[:len(again)]
+                                    normals=False).albedo[:len(again)]
     return samples
 
 
