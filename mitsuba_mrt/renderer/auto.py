@@ -137,11 +137,6 @@ CHECK_SLACK = 1.5
 #: trace's kernel time scaled to as many pixels (that trace also follows
 #: each pixel's centre for its ids): 0.65-0.81 on the gallery at 256 px.
 PASS_OVER_GRID = 0.75
-#: What a pass adds on the host to the grid trace's own (reading every pixel
-#: back and adding it to the passes): these seconds, and these per pixel the
-#: grid does not hold (the gallery at 256 and 512 px: 12-15 and 22-32 ms,
-#: which left the pass 1.3-1.55 times what the grid alone predicted).
-PASS_HOST_S, PASS_HOST_PER_PIXEL = 0.008, 8e-8
 
 #: Seconds from a time-limited render's start to the end of its first round
 #: of passes, per traced objects and pixel count, from the last such render
@@ -397,9 +392,7 @@ def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:
     pass over every pixel is expected to take: the trace's kernels' run
     time scaled to every pixel, times :data:`PASS_OVER_GRID`, plus what the
     trace took beyond its kernels (launching them, reading them back, and
-    in a fresh process the first use of the scene and the kernels), plus
-    the pass's own host work on the pixels the grid does not hold
-    (:data:`PASS_HOST_S`, :data:`PASS_HOST_PER_PIXEL`)."""
+    in a fresh process the first use of the scene and the kernels)."""
     begin = time.perf_counter()
     with kernel_seconds() as spent:
         grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
@@ -407,7 +400,6 @@ def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:
     wall = time.perf_counter() - begin
     pixels = pattern.width * pattern.height
     return grid, (max(wall - spent.execute, 0.0)
-                  + PASS_HOST_S + PASS_HOST_PER_PIXEL * (pixels - pattern.count)
                   + PASS_OVER_GRID * spent.execute * pixels / pattern.count)
 
 
