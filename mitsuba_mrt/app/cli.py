@@ -222,8 +222,8 @@ def _bench(args) -> int:
     from ..bench import run_experiment, summary_line
 
     command = "python -m mitsuba_mrt " + shlex.join(args.argv)
-    if args.repeats is not None and args.repeats < 1:
-        raise MRTError(f"--repeats must be at least 1, got {args.repeats}")
+    if args.repeats is not None and args.repeats < 1:  # (run_experiment's words)
+        raise MRTError(f"--repeats must be an integer >= 1, got {args.repeats}")
     if args.experiment == "rival":
         return _rival(args, command)
     with contextlib.ExitStack() as stack:

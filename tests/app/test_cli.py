@@ -84,8 +84,8 @@ BAD = [
     # more memory than there is: refused before any work, with an estimate
     (["render", SCENES / "paper_fraction.xml", "-D", "res=20000"],
      "20000 x 20000 render needs about 100.0 GB of memory (250 bytes per pixel)"),
-    (["bench", "rival", "--quick", "--repeats", "0"], "--repeats must be at least 1, got 0"),
-    (["bench", "fraction", "--quick", "--repeats", "-2"], "--repeats must be at least 1, got -2"),
+    (["bench", "rival", "--quick", "--repeats", "0"], "--repeats must be an integer >= 1, got 0"),
+    (["bench", "rival", "--quick", "--repeats", "-2"], "--repeats must be an integer >= 1, got -2"),
 ]
 
 
