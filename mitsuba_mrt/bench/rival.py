@@ -5,8 +5,9 @@ Intel Open Image Denoise with albedo and normal guides from the same
 samples, along an spp ladder at OIDN's ``fast`` and ``high`` presets (its
 time-error curve: at each time the lower of the two).  Per scene this
 experiment measures, warm and alternating in one process, each round of
-repeats with its own seed (times: the median; errors: the mean): the full render at the scene's spp (time 1), the alternative's
-ladder, the default ``auto``, ``auto`` under time limits of
+repeats with its own seed (times: the median; errors: the mean): the full
+render at the scene's spp (time 1), the alternative's ladder, the default
+``auto``, ``auto`` under time limits of
 :data:`LIMITS` of the full render, and each MRT configuration.  Errors are
 against converged renders (:data:`CONVERGED_SPP`): the film's own filter
 for the full render and the MRT, a box filter for the denoised renders.
