@@ -254,6 +254,20 @@ def _closest(values, target) -> int:
     return int(np.argmin([abs(v - target) for v in values]))
 
 
+def check_repeats(repeats) -> int:
+    """``repeats`` (the timed rounds of every method), refused where it is not
+    an integer >= 1.
+
+    Examples
+    --------
+    >>> check_repeats(3)
+    3
+    """
+    if int(repeats) != repeats or repeats < 1:
+        raise MRTError(f"--repeats must be an integer >= 1, got {repeats}")
+    return int(repeats)
+
+
 def build_experiment(name: str, quick: bool = False, res: int | None = None) -> Experiment:
     """The points of experiment ``name``; ``quick``: a reduced sweep at low resolution.
 

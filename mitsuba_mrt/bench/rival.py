@@ -25,12 +25,14 @@ import statistics
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from ..imageio import OutputSet
 from ..recon.metrics import paper_error
 from ..recon.sampling import every_pixel
+from .experiments import check_repeats
 
 #: spp of the alternative's ladder.
 LADDER = (1, 2, 4, 8, 16, 32, 64)
@@ -136,7 +138,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     for share in LIMITS:  # each limit is relative to this process's full render
         key = f"auto --time-limit {share}"
         times[key], scores[key] = [], []
-        for seed in range(max(repeats, 1)):
+        for seed in range(repeats):
             begin = time.perf_counter()
             out = render(scene, mode="auto", time_limit=share * full_s, seed=seed)
             times[key].append(time.perf_counter() - begin)
@@ -144,15 +146,26 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     rows = []
     for k, runs in scores.items():
         seconds = statistics.median(times[k])
-        chose, spp_used = _most_common([(s[3], s[4]) for s in runs])
-        error, mse, flip = (float(np.mean([s[j] for s in runs])) for j in range(3))
+        chose, spp_used = _most_common([(r.chose, r.spp) for r in runs])
+        error, mse, flip = (float(np.mean([getattr(r, m) for r in runs]))
+                            for m in ("error", "rel_mse", "flip"))
         rows.append(Row(name, k, spp_used, seconds, seconds / full_s, error, mse, chose, flip))
     return rows
 
 
-def _score(method: str, out, spp: int, truth: dict) -> tuple:
-    """(error, relMSE, FLIP, the plan ``auto`` chose, spp) of one render's
-    ``out`` against ``truth`` (the converged renders, film and box filter)."""
+class _Score(NamedTuple):
+    """One render's errors against the converged render, its plan and spp."""
+
+    error: float
+    rel_mse: float
+    flip: float
+    chose: str
+    spp: int
+
+
+def _score(method: str, out, spp: int, truth: dict) -> _Score:
+    """The :class:`_Score` of one render's ``out`` against ``truth`` (the
+    converged renders, film and box filter)."""
     if isinstance(out, tuple):  # render_reference's, render_denoised's
         image, used = out[0], "full+oidn" if _alternative(method) else "full"
     else:
@@ -163,8 +176,8 @@ def _score(method: str, out, spp: int, truth: dict) -> tuple:
         chose = out.auto.choice.label
     spp_used = int(method.split("@")[1]) if _alternative(method) else (
         spp if method == "full" else int(out.spp))
-    return (paper_error(image, reference), rel_mse(image, reference),
-            flip_error(image, reference), chose, spp_used)
+    return _Score(paper_error(image, reference), rel_mse(image, reference),
+                  flip_error(image, reference), chose, spp_used)
 
 
 def _most_common(choices: list[tuple[str, int]]) -> tuple[str, int]:
@@ -297,6 +310,7 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
 def run_rival(out_dir, scenes: list[tuple[str, str, dict]], repeats: int = 2,
               quick: bool = False, command: str = "", echo=print) -> Path:
     """Measure every (path, name, defines) of ``scenes``; write the report."""
+    repeats = check_repeats(repeats)
     rows = []
     for path, name, defines in scenes:
         begin = time.perf_counter()

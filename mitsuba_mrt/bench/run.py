@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ..errors import MRTError
 from ..imageio import atomic_path
-from .experiments import EXPERIMENTS, build_experiment, resolve_methods
+from .experiments import EXPERIMENTS, build_experiment, check_repeats, resolve_methods
 from .analysis import CSV_COLUMNS, environment_line, markdown_tables, read_csv, write_csv
 from .measure import MIN_TIMED_SECONDS, PointRunner
 from .measure_denoise import DenoiseRunner
@@ -129,8 +129,7 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
         return out
     if repeats is None:
         repeats = 1 if quick else 3
-    if int(repeats) != repeats or repeats < 1:
-        raise MRTError(f"--repeats must be an integer >= 1, got {repeats}")
+    repeats = check_repeats(repeats)
     experiment = build_experiment(name, quick=quick, res=res)
     from ..renderer.variants import activate, environment
 
