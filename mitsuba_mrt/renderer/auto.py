@@ -54,6 +54,7 @@ from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings
 from .scene_query import environment_map, lit_diffuse_by_points, textured_diffuse_shapes
+from .trace import trace_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -369,16 +370,15 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
 def _surfaces(scene, tracer, width: int, height: int,
               id_pass: SparseTrace | None = None) -> tuple | None:
     """(each pixel's shape index, :func:`textured_diffuse_shapes`) where the
-    scene has a textured diffuse surface, else None: the ids of every pixel,
-    one ray through its centre (``id_pass``'s where given), for the passes
-    to find the textured pixels."""
+    scene has a textured diffuse surface, else None: the shape of every
+    pixel's centre ray (:func:`~.trace.trace_shapes`; ``id_pass``'s where
+    given), for the passes to find the textured pixels."""
     textured = textured_diffuse_shapes(scene)
     if not textured.any():
         return None
-    if id_pass is None:
-        id_pass = tracer(every_pixel(width, height), stream=SeedStream.EDGES, radiance=False,
-                         albedo=False, replay=True)
-    return id_pass.shape_index, textured
+    if id_pass is not None:
+        return id_pass.shape_index, textured
+    return trace_shapes(scene, tracer.sensor, every_pixel(width, height), replay=True), textured
 
 
 def _id_pass(tracer, width: int, height: int) -> SparseTrace:

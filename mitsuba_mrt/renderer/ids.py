@@ -173,24 +173,50 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     mask, pointers, inner, chain, normal, back = _IDS(
         scene, sensor, lights, _aligned_float(pixel_xy[:, 0]), _aligned_float(pixel_xy[:, 1]),
         layout, objects=(scene, sensor), record=replay)
-    keys, indices = lookup
-
-    def to_index(ptr):
-        ptr = _to_numpy(ptr, n).astype(np.int64)
-        if not len(keys):
-            return np.zeros(n, dtype=np.int64)
-        pos = np.clip(np.searchsorted(keys, ptr), 0, len(keys) - 1)
-        return np.where(keys[pos] == ptr, indices[pos], 0).astype(np.int64)
-
-    shape_index = to_index(pointers)
+    keys = lookup[0]
+    shape_index = _to_index(pointers, n, lookup)
     steps = [np.where(_to_numpy(bounced, n).astype(bool),
-                      np.where((index := to_index(ptr)) > 0, index, len(keys) + 1), 0)
+                      np.where((index := _to_index(ptr, n, lookup)) > 0, index, len(keys) + 1),
+                      0)
              for bounced, ptr in chain]
     path = _with_inner_shapes(_path_ids(shape_index, steps, len(keys)),
                               _to_numpy(inner, n).astype(np.int64), scene)
     back = _to_numpy(back, n).astype(bool)
     path = _with_side(path, back)
     return shape_index, _to_numpy(mask, n).astype(np.uint32), path, _to_numpy(normal, n), back
+
+
+def _to_index(pointers, n: int, lookup: tuple) -> np.ndarray:
+    """The 1-based shape index (0: none or unlisted) of each of ``n`` Dr.Jit
+    shape pointers, by ``lookup`` (:func:`.scene_query._shape_lookup`)."""
+    keys, indices = lookup
+    pointers = _to_numpy(pointers, n).astype(np.int64)
+    if not len(keys):
+        return np.zeros(n, dtype=np.int64)
+    pos = np.clip(np.searchsorted(keys, pointers), 0, len(keys) - 1)
+    return np.where(keys[pos] == pointers, indices[pos], 0).astype(np.int64)
+
+
+def shape_indices(scene, sensor, pixel_xy: np.ndarray, lookup, replay: bool) -> np.ndarray:
+    """The shape index alone (1-based, 0: none) of each pixel's centre ray,
+    as :func:`_ids_jit` gives it, for the cost of one ray a pixel: no lights
+    looked at, no mirror followed (``auto``'s textured surfaces)."""
+    if not is_jit():
+        return _ids_scalar(scene, sensor, None, pixel_xy, [], lookup, "none")[0]
+    layout = tuple(int(v) for v in sensor.film().crop_size())
+    pointers = _SHAPES(scene, sensor, _aligned_float(pixel_xy[:, 0]),
+                       _aligned_float(pixel_xy[:, 1]), layout, objects=(scene, sensor),
+                       record=replay)
+    return _to_index(pointers, len(pixel_xy), lookup)
+
+
+def _shapes_kernel(scene, sensor, pixel_x, pixel_y, layout):
+    """The kernel of :func:`shape_indices`: the pointer of the shape each
+    pixel's centre ray hits first (:func:`_hit_shape`)."""
+    ray, _ = _camera_ray(sensor, None, mi.Point2f(pixel_x + 0.5, pixel_y + 0.5), 1, centre=True)
+    pointers = _hit_shape(scene.ray_intersect(ray))
+    dr.eval(pointers)
+    return pointers
 
 
 def _ids_kernel(scene, sensor, lights, pixel_x, pixel_y, layout):
@@ -239,3 +265,5 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
 
 #: The id kernel, replayed from a recording when the same trace repeats.
 _IDS = Replay(_ids_kernel)
+#: The shapes-only kernel, likewise.
+_SHAPES = Replay(_shapes_kernel)

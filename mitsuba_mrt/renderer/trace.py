@@ -19,7 +19,7 @@ from ..errors import MRTError
 from ..types import SparseTrace
 from .albedo_pass import albedo_pass
 from .develop import ALBEDO_FIRST_SAMPLES, _develop_jit, _develop_scalar, _Developed
-from .ids import _ids_jit, _ids_scalar
+from .ids import _ids_jit, _ids_scalar, shape_indices
 from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
@@ -142,6 +142,17 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        alpha=samples.alpha if radiance else None,
                        variance=samples.variance if radiance else None, normal=normal,
                        odd=samples.odd if radiance else None, albedo_per_shape=one_colour)
+
+
+def trace_shapes(scene: mi.Scene, sensor: mi.Sensor, pixel_xy: np.ndarray,
+                 replay: bool = False) -> np.ndarray:
+    """The shape index (1-based, 0: none) of what one ray through each of
+    ``pixel_xy``'s centres hits: the ids' shape alone, for one ray a pixel
+    (no light looked at, no mirror followed; ``replay`` as
+    :func:`trace_pixels`')."""
+    pixel_xy = np.asarray(pixel_xy, dtype=np.int64)
+    return shape_indices(scene, sensor, pixel_xy, _shape_lookup(scene),
+                         replay and is_jit() and replayable(scene))
 
 
 def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, spp: int,

@@ -120,3 +120,26 @@ def test_a_scene_has_delta_lobes_where_a_bsdf_may_sample_one(variant, bsdf, delt
 
     extra = f'<shape type="cube">{bsdf}</shape>'
     assert has_delta_lobes(mi.load_string(small_scene_xml(16, extra=extra))) is delta
+
+
+def test_the_shapes_alone_are_the_ids_shape_index(variant):
+    from mitsuba_mrt.recon.sampling import every_pixel
+    from mitsuba_mrt.renderer.trace import trace_pixels, trace_shapes
+
+    # instances of two groups, a mirror and the background: the one-ray
+    # kernel names the same shape in every pixel as the ids' full kernel
+    mirror = MIRROR_SCENE.split("</shape>")[0] + "</shape>"
+    spheres = MIRROR_SCENE[len(mirror):]
+    mirror = mirror.replace('<scale value="4"/>', '<scale value="2"/>')  # and the background
+    extra = (_in_a_group('<shape type="sphere" id="m"><float name="radius" value="0.5"/>'
+                         '<bsdf type="diffuse"/></shape>', "a_matte",
+                         ['<translate x="-2"/>', '<translate x="-1" y="2"/>'])
+             + mirror + spheres)
+    scene = mi.load_string(small_scene_xml(32, extra=extra, shapes=False))
+    sensor = scene.sensors()[0]
+    xy = every_pixel(32, 32)
+    ids = trace_pixels(scene, sensor, scene.integrator(), xy, 1, radiance=False,
+                       albedo=False).shape_index
+    assert len(set(ids.tolist())) >= 3 and (ids == 0).any()
+    assert np.array_equal(trace_shapes(scene, sensor, xy), ids)
+    assert np.array_equal(trace_shapes(scene, sensor, xy, replay=True), ids)
