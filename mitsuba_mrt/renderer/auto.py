@@ -76,10 +76,12 @@ LIMIT_SPP_FACTOR = 4
 #: doubles them to the scene's spp costs a full render, the rounds before it
 #: included, and a full render's own noise is the target.
 DEFAULT_SPP_SHARE = 0.5
-#: Pixels of the probe that tells a noise-free scene (traced with two seeds):
-#: its cost grows with them, and a noisy scene is noisy in nearly every one
-#: (one it misses is rendered in full: ``mi.render``'s image, not denoised).
-PROBE_PIXELS = 1024
+#: Pixels of the probe that tells a noise-free scene (traced with two seeds),
+#: a lattice of this many per side spread over the image: its cost grows
+#: with them, and a noisy scene is noisy in nearly every pixel the lattice
+#: spreads over (one it misses is rendered in full: ``mi.render``'s image,
+#: not denoised).
+PROBE_SIDE = 16
 #: The plan where one pass and OIDN on the whole image would overrun a time
 #: limit: the MRT's cheapest image, a tenth of the pixels' samples (its
 #: grid, one sample each) denoised and reconstructed.
@@ -411,16 +413,16 @@ def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> boo
 
 
 def noise_free(tracer, width: int, height: int) -> bool:
-    """Whether :data:`PROBE_PIXELS` pixels spread over the image come out the
-    same from two sets of random numbers (a deterministic scene: its full
-    render has no noise).
+    """Whether a lattice of :data:`PROBE_SIDE` x :data:`PROBE_SIDE` pixels
+    over the image (their cells' centres) comes out the same from two sets
+    of random numbers (a deterministic scene: its full render has no noise).
 
     One small launch, before the passes: their first round, with its guides
     and the denoiser's estimates, costs several full renders of such a scene.
     """
-    count = width * height
-    index = np.arange(0, count, max(1, count // PROBE_PIXELS))[:PROBE_PIXELS]
-    xy = np.stack([index % width, index // width], axis=1)
+    columns = np.unique((np.arange(PROBE_SIDE) + 0.5) * width // PROBE_SIDE).astype(np.int64)
+    rows = np.unique((np.arange(PROBE_SIDE) + 0.5) * height // PROBE_SIDE).astype(np.int64)
+    xy = np.stack(np.meshgrid(columns, rows), axis=-1).reshape(-1, 2)
     # each pixel twice in one launch: a sampler draws other numbers for each lane
     probe = replace(tracer, spp=min(tracer.spp, 2))(np.concatenate([xy, xy]),
                                                     stream=SeedStream.PILOT, aovs=False,
