@@ -449,12 +449,12 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
               normals: bool = True, few: bool = False) -> _Developed:
     """The :class:`_Developed` of :func:`_packed`'s array of
     :func:`_developed_channels` (float64 fields; zeros where not traced)."""
-    values, at = np.asarray(packed).reshape(n, -1), [0]
+    values, at = np.asarray(packed, dtype=np.float64).reshape(n, -1), [0]
 
-    def take(k):  # the next k channels
+    def take(k):  # the next k channels (views of one conversion)
         first = at[0]
         at[0] += k
-        return np.array(values[:, first:first + k], dtype=np.float64)
+        return values[:, first:first + k]
 
     # (zeros of their own, not copies: untraced fields cost no memory until written)
     rgb, alpha, second = (take(3), take(1).reshape(n), take(3)) if radiance else (
@@ -471,8 +471,7 @@ def _variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
     """A single sample's variance from its mean square and mean (float64)."""
     variance = second - mean ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)
-    variance[~(variance > VARIANCE_FLOOR * second)] = 0.0
-    return variance
+    return np.where(variance > VARIANCE_FLOOR * second, variance, 0.0)
 
 
 def _new_block(film, rfilter, channels: int) -> mi.ImageBlock:
