@@ -195,13 +195,14 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
-    plan, pattern, grid, check = None, None, None, False
+    plan, pattern, grid, check, id_pass = None, None, None, False, None
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
             pattern = grid_pattern(width, height, params.sample_fraction)
             outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
             plan, grid, check = outcome.plan, outcome.grid, outcome.check
+            id_pass = outcome.id_pass
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
         choice = plan.choice
@@ -215,13 +216,13 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
             return _passes_result(outcome, tracer, params, start)
         if check:  # an MRT image chosen without a pilot: kept if its check says so
-            result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=outcome.id_pass),
+            result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=id_pass),
                           params.with_(denoise="oidn" if choice.denoise else "none"),
                           choice.mode, plan, start, progress or _quiet, grid)
             return _checked(result, scene, pattern, tracer, params, start, progress)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
-        tracer = replace(tracer, spp=choice.spp)
+        tracer = replace(tracer, spp=choice.spp, id_pass=id_pass)
     if pattern is None:  # (a plan's pilot has made it already)
         pattern = grid_pattern(width, height, params.sample_fraction)
     return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)

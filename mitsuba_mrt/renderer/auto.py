@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import mitsuba as mi
 import numpy as np
@@ -53,7 +54,8 @@ from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings
-from .scene_query import environment_map, lit_diffuse_by_points, textured_diffuse_shapes
+from .scene_query import (environment_map, lit_diffuse_by_points, sampler_bakes_spp,
+                          textured_diffuse_shapes)
 from .trace import trace_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
@@ -140,6 +142,20 @@ CHECK_SLACK = 1.5
 #: trace's kernel time scaled to as many pixels (that trace also follows
 #: each pixel's centre for its ids): 0.65-0.81 on the gallery at 256 px.
 PASS_OVER_GRID = 0.75
+
+#: Under a time limit, :data:`HOME`'s grid at the scene's spp is expected to
+#: take at most this many times the grid probe's kernel time (1 spp) per spp
+#: (the probe's share that does not grow with the spp, its ids and albedo,
+#: makes the measured ratio 0.42-0.74 on the gallery at 512 px).
+GRID_OVER_PROBE = 0.75
+#: ... and its id pass at most this many times the probe's kernel time, before
+#: it is traced (6-31 on the gallery at 512 px: it is traced, and its time
+#: counted, only where even this much would fit).
+ID_PASS_OVER_PROBE = 32.0
+#: ... and the stages after its traces (OIDN on the grid, the reconstruction)
+#: this many seconds a pixel (0.29-0.38 us warm on the gallery at 400-512 px).
+FINISH_PER_PIXEL = 0.45e-6
+WITHIN_REASON = "{}; within the time limit"
 
 #: Seconds from a time-limited render's start to the end of its first round
 #: of passes, per traced objects and pixel count, from the last such render
@@ -233,10 +249,15 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
     key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
-    surfaces, found = None, False
+    surfaces, found, probed = None, False, None
+    if escape and limit is not None and denoise and params.noise_threshold is None \
+            and spp >= HOME_MIN_SPP:
+        outcome, id_pass, probed = _mrt_within(scene, pattern, tracer, params, started, notes)
+        if outcome is not None:
+            return outcome
     if limit is not None and denoise:
         outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
-                                                  notes)
+                                                  notes, probed, id_pass)
         if outcome is not None:
             return outcome
     if denoise and not found:
@@ -331,11 +352,15 @@ def _kept_cost(key: tuple) -> LaunchCost:
 
 
 def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
-                   key: tuple, notes: list) -> tuple[AutoOutcome | None, tuple | None, bool]:
+                   key: tuple, notes: list, probed: "_Probe | None" = None,
+                   id_pass: SparseTrace | None = None
+                   ) -> tuple[AutoOutcome | None, tuple | None, bool]:
     """Under a time limit: (the preview's outcome where one pass and OIDN on
     the whole image would end after :data:`PREVIEW_SLACK` times the limit,
     else None; the passes' textured surfaces (:func:`_surfaces`) and whether
-    they were looked up, which took time the question then counts)."""
+    they were looked up, which took time the question then counts).
+    ``probed``: the grid probe, where :func:`_mrt_within` has made it;
+    ``id_pass``: the image's id pass, where it has traced it."""
     width, height, limit = pattern.width, pattern.height, params.time_limit
     end = started + PREVIEW_SLACK * limit
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
@@ -347,7 +372,8 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     if first_s is not None:
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         return (AutoOutcome(preview) if due else None), None, False
-    grid, pass_s = _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
+    probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
+    grid, pass_s = probed.grid, probed.pass_s
 
     def due() -> bool:
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
@@ -355,7 +381,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     if due():
         return AutoOutcome(preview, grid=grid), None, False
     # the passes' textured pixels, then the same question with their time spent
-    surfaces = _surfaces(scene, tracer, width, height)
+    surfaces = _surfaces(scene, tracer, width, height, id_pass)
     return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
 
 
@@ -389,20 +415,77 @@ def _id_pass(tracer, width: int, height: int) -> SparseTrace:
                   replay=True)
 
 
-def _grid_probe(pattern: SamplePattern, tracer) -> tuple[SparseTrace, float]:
+class _Probe(NamedTuple):
+    """The grid probe (:func:`_grid_probe`): the preview's grid trace, the
+    seconds a pass over every pixel is expected to take, the trace's kernels'
+    run time, what it took beyond them, and whether it recorded its kernels
+    (a process's first trace of the scene)."""
+
+    grid: SparseTrace
+    pass_s: float
+    execute: float
+    host: float
+    recorded: bool
+
+
+def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
     """The preview's grid trace (:data:`PREVIEW`'s spp), and the seconds a
     pass over every pixel is expected to take: the trace's kernels' run
     time scaled to every pixel, times :data:`PASS_OVER_GRID`, plus what the
     trace took beyond its kernels (launching them, reading them back, and
     in a fresh process the first use of the scene and the kernels)."""
-    begin = time.perf_counter()
+    begin, recorded = time.perf_counter(), recordings()
     with kernel_seconds() as spent:
         grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
                                                 replay=True)
-    wall = time.perf_counter() - begin
+    host = max(time.perf_counter() - begin - spent.execute, 0.0)
     pixels = pattern.width * pattern.height
-    return grid, (max(wall - spent.execute, 0.0)
-                  + PASS_OVER_GRID * spent.execute * pixels / pattern.count)
+    return _Probe(grid, host + PASS_OVER_GRID * spent.execute * pixels / pattern.count,
+                  spent.execute, host, recordings() > recorded)
+
+
+def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
+                notes: list) -> tuple[AutoOutcome | None, SparseTrace | None, _Probe | None]:
+    """Under a time limit: (:data:`HOME`'s outcome where the scene's kind
+    points to it (:func:`unmeasured_plan`) and it is expected to end within
+    :data:`TIME_MARGIN` of the limit, else None; the image's id pass where
+    it was traced; the grid probe where it was made).
+
+    The grid probe's kernel time tells the plan's traces (the grid at the
+    scene's spp: :data:`GRID_OVER_PROBE`; the id pass, traced only where
+    :data:`ID_PASS_OVER_PROBE` times it fits, then measured), the pixels
+    its other stages (:data:`FINISH_PER_PIXEL`), and a first trace of the
+    scene in this process what recording the grid's kernels adds.  A sampler
+    that compiles kernels per spp (:func:`~.scene_query.sampler_bakes_spp`)
+    is not planned so in such a process: its compilation cannot be told.
+    The plan's image is not checked (:func:`keeps`): the check's fallback,
+    the passes, would start after the limit.
+    """
+    width, height = pattern.width, pattern.height
+    chosen = unmeasured_plan(scene, width * height)
+    if chosen is None or chosen[0] is not HOME:
+        return None, None, None
+    probed = _grid_probe(pattern, tracer)
+    if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
+        return None, None, probed
+    end = started + TIME_MARGIN * params.time_limit
+    rest = (GRID_OVER_PROBE * tracer.spp * probed.execute + FINISH_PER_PIXEL * width * height
+            + (probed.host if probed.recorded else 0.0))
+    if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + rest > end:
+        return None, None, probed
+    id_pass = _id_pass(tracer, width, height)
+    if chosen[1] == WIDE_REASON:
+        share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
+        if share > WIDE_EDGE_SHARE:
+            notes.append(f"{share:.1%} of the pixels at an edge between ids: "
+                         f"too many for the MRT's grid")
+            return None, id_pass, probed
+    if time.perf_counter() + rest > end:
+        return None, id_pass, probed
+    plan = Plan(replace(chosen[0], spp=tracer.spp), WITHIN_REASON.format(chosen[1]),
+                time_limit=params.time_limit, notes=notes,
+                pilot_s=time.perf_counter() - started - id_pass.seconds)
+    return AutoOutcome(plan, id_pass=id_pass), id_pass, probed
 
 
 def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> bool:

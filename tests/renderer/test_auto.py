@@ -186,6 +186,42 @@ def test_the_id_pass_plan_is_not_taken_under_a_limit_a_threshold_or_an_area_ligh
         assert mitsuba_mrt.render(point_lit, **kwargs).auto.reason != auto.HOME_REASON
 
 
+def test_a_time_limit_the_id_pass_plan_fits_takes_it_and_traces_the_id_pass_once(variant,
+                                                                                monkeypatch):
+    from mitsuba_mrt.renderer import trace
+
+    scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    plain = mitsuba_mrt.render(scene)  # (its kernels recorded: the process is warm)
+    id_passes = []
+    original = trace.trace_pixels
+
+    def counting(*args, **kwargs):
+        out = original(*args, **kwargs)
+        radiance = args[7] if len(args) > 7 else kwargs.get("radiance", True)
+        id_passes.extend([len(out.shape_index)] if not radiance else [])
+        return out
+    monkeypatch.setattr("mitsuba_mrt.renderer.api.trace_pixels", counting)
+    result = mitsuba_mrt.render(scene, time_limit=60.0)
+    plan = result.auto
+    assert result.mode_used == "idpass" and result.params.denoise == "oidn"
+    assert plan.reason == auto.WITHIN_REASON.format(auto.HOME_REASON)
+    assert plan.time_limit == 60.0 and not plan.passes and plan.choice.error is None
+    assert id_passes == [384 * 384]  # traced to be timed, then reused by the mode
+    # the same plan's image as without a limit (same seed), unchecked
+    assert np.array_equal(result.image, plain.image)
+
+
+def test_a_time_limit_too_short_for_the_id_pass_plan_traces_no_id_pass(variant, monkeypatch):
+    scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    mitsuba_mrt.render(scene)
+
+    def no_id_pass(*args):
+        raise AssertionError("the id pass was traced")
+    monkeypatch.setattr(auto, "_id_pass", no_id_pass)
+    for limit in (1e-6, 0.02):
+        assert mitsuba_mrt.render(scene, time_limit=limit).mode_used != "idpass"
+
+
 def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(variant):
     # an area light, diffuse surfaces, 512 x 512: the id pass, its grid denoised,
     # kept because its held-out check finds it near a full render's noise
