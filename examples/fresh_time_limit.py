@@ -1,9 +1,9 @@
 """``auto --time-limit`` as a user's first render: each render in a fresh process.
 
     python examples/fresh_time_limit.py checker_border cornell crop_rgba envmap_objects \
-        instanced materials room spot_textures two_sensors
+        instanced materials room spot_textures two_sensors [--res 512]
 
-Per gallery scene at 256 x 256: the full render in three fresh processes
+Per gallery scene at ``--res`` a side (256 by default): the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
 rendering once with ``time_limit``.  Printed: each render's seconds over its
 limit and the plan it chose.  Kernels come from Dr.Jit's disk cache and
@@ -12,6 +12,7 @@ change: the first run fills both); the process has no earlier render to
 learn OIDN's or a pass's cost from.
 """
 
+import argparse
 import json
 import os
 import statistics
@@ -29,7 +30,8 @@ import mitsuba_mrt
 from mitsuba_mrt import runtime
 runtime.configure()
 mitsuba_mrt.activate("auto")
-defines = {"res": 256, **({"film_res": 384} if "crop_rgba" in sys.argv[1] else {})}
+res = int(sys.argv[3])
+defines = {"res": res, **({"film_res": res + 128} if "crop_rgba" in sys.argv[1] else {})}
 scene = mitsuba_mrt.load_scene(sys.argv[1], **defines)  # (crop_rgba's film holds its crop)
 if sys.argv[2] == "full":
     print(json.dumps({"seconds": mitsuba_mrt.render_reference(scene)[1], "chose": "full"}))
@@ -39,22 +41,26 @@ else:
 """
 
 
-def _child(path: Path, limit: str) -> dict:
+def _child(path: Path, limit: str, res: int) -> dict:
     env = dict(os.environ)
     # as a user's Python: the package's modules compiled once, their bytecode
     # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit],
+    out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit, str(res)],
                          env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main():
-    for name in sys.argv[1:]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scenes", nargs="+")
+    parser.add_argument("--res", type=int, default=256)
+    args = parser.parse_args()
+    for name in args.scenes:
         path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
-        full = statistics.median(_child(path, "full")["seconds"] for _ in range(3))
+        full = statistics.median(_child(path, "full", args.res)["seconds"] for _ in range(3))
         for share in LIMITS:
-            run = _child(path, str(share * full))
+            run = _child(path, str(share * full), args.res)
             print(f"{name}: full {full:.3f} s; limit {share}: "
                   f"{run['seconds'] / (share * full):.2f}x the limit ({run['chose']})", flush=True)
 
