@@ -14,7 +14,9 @@
    :data:`SKY` (mode ``refine``, its grid denoised) under an environment
    map.  The image is kept where its held-out check (:mod:`.held_out`,
    :func:`keeps`) finds it near a full render's quality, else the passes
-   render the image after it.
+   render the image after it.  Under a time limit (OIDN installed, at least
+   :data:`HOME_MIN_SPP` spp) the same :data:`HOME` plan, unchecked, where
+   the grid probe says it ends within the limit (:func:`_mrt_within`).
 3. Under a time limit too short for one pass and OIDN on the whole image
    (judged from the first round of an earlier time-limited render of the
    scene in this process, else from the preview's own grid, traced first):
