@@ -157,6 +157,7 @@ ID_PASS_OVER_PROBE = 32.0
 #: ... and the stages after its traces (OIDN on the grid, the reconstruction)
 #: this many seconds a pixel (0.29-0.38 us warm on the gallery at 400-512 px).
 FINISH_PER_PIXEL = 0.45e-6
+#: The reason of :data:`HOME` taken under a time limit (``{}``: its kind's).
 WITHIN_REASON = "{}; within the time limit"
 
 #: Seconds from a time-limited render's start to the end of its first round
