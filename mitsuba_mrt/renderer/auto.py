@@ -334,14 +334,22 @@ def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, note
     id_pass = None
     if chosen[1] == WIDE_REASON:
         id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
-        share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
-        if share > WIDE_EDGE_SHARE:
-            notes.append(f"{share:.1%} of the pixels at an edge between ids: "
-                         f"too many for the MRT's grid")
+        if _too_many_edges(id_pass, params, width, height, notes):
             return None, id_pass
     pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
     return AutoOutcome(Plan(replace(chosen[0], spp=tracer.spp), chosen[1], pilot_s=pilot_s,
                             notes=notes), check=True, id_pass=id_pass), id_pass
+
+
+def _too_many_edges(id_pass: SparseTrace, params: MRTParams, width: int, height: int,
+                    notes: list) -> bool:
+    """Whether more than :data:`WIDE_EDGE_SHARE` of the id pass's pixels lie at
+    an edge between ids (too many for :data:`WIDE_REASON`'s plan: a note says so)."""
+    share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
+    if share > WIDE_EDGE_SHARE:
+        notes.append(f"{share:.1%} of the pixels at an edge between ids: "
+                     f"too many for the MRT's grid")
+    return share > WIDE_EDGE_SHARE
 
 
 def _kept_cost(key: tuple) -> LaunchCost:
@@ -477,12 +485,8 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + rest > end:
         return None, None, probed
     id_pass = _id_pass(tracer, width, height)
-    if chosen[1] == WIDE_REASON:
-        share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
-        if share > WIDE_EDGE_SHARE:
-            notes.append(f"{share:.1%} of the pixels at an edge between ids: "
-                         f"too many for the MRT's grid")
-            return None, id_pass, probed
+    if chosen[1] == WIDE_REASON and _too_many_edges(id_pass, params, width, height, notes):
+        return None, id_pass, probed
     if time.perf_counter() + rest > end:
         return None, id_pass, probed
     plan = Plan(replace(chosen[0], spp=tracer.spp), WITHIN_REASON.format(chosen[1]),
