@@ -305,7 +305,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         target_error=params.noise_threshold, deadline=deadline,
         max_spp=max_spp, full_spp=spp, area=area,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round,
-        surfaces=surfaces, cost=_kept_cost(key))
+        surfaces=surfaces, cost=_kept_cost(key, tracer))
     if image is not None:
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
@@ -352,10 +352,11 @@ def _too_many_edges(id_pass: SparseTrace, params: MRTParams, width: int, height:
     return share > WIDE_EDGE_SHARE
 
 
-def _kept_cost(key: tuple) -> LaunchCost:
-    """The launches kept for ``key`` (new where there are none), now the
-    most recently used of :data:`_launch_costs`."""
-    cost = _launch_costs.pop(key, None) or LaunchCost()
+def _kept_cost(key: tuple, tracer) -> LaunchCost:
+    """The launches kept for ``key`` (new where there are none, of
+    ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`."""
+    cost = _launch_costs.pop(key, None) or LaunchCost(
+        spp_compiles=sampler_bakes_spp(tracer.sensor.sampler()))
     _launch_costs[key] = cost
     for old in list(_launch_costs)[:-KEPT_COSTS]:
         del _launch_costs[old]

@@ -40,6 +40,7 @@ from ..recon.denoise import (denoise_image, denoise_shading, expected_seconds, p
                              textured_pixels)
 from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
+from ..runtime.jit import kernel_seconds
 from ..types import SeedStream
 from .replay import recordings
 from .scene_query import sampler_bakes_spp
@@ -390,7 +391,10 @@ class LaunchCost:
     line through the replayed launches so far (``launches``: (spp, seconds,
     whether it recorded its kernels' replay, :mod:`.replay`)) moved up until
     none took longer than it says; a launch of an spp not launched before
-    records anew, which adds :attr:`record_s`.
+    records anew, which adds :attr:`record_s`.  Where a new spp compiles no
+    kernel (``spp_compiles`` False: a sampler that does not bake its spp in,
+    :func:`~.scene_query.sampler_bakes_spp`), what a launch spent compiling
+    (a process's first, or the disk cache's first) is left out of its time.
 
     A launch's fixed part (its kernels' start, reading every pixel back)
     makes a 1-spp launch cost about two of a larger launch's spp; with only
@@ -416,9 +420,14 @@ class LaunchCost:
     """
 
     launches: list = field(default_factory=list)
+    spp_compiles: bool = True
 
-    def add(self, spp: int, seconds: float, recorded: bool = False) -> None:
-        """Add a launch; only the last :data:`KEPT_LAUNCHES` are kept."""
+    def add(self, spp: int, seconds: float, recorded: bool = False,
+            compile_s: float = 0.0) -> None:
+        """Add a launch (``compile_s``: what of it compiled kernels); only the
+        last :data:`KEPT_LAUNCHES` are kept."""
+        if not self.spp_compiles:
+            seconds -= compile_s
         self.launches.append((int(spp), float(seconds), bool(recorded)))
         del self.launches[:-KEPT_LAUNCHES]
 
@@ -507,9 +516,10 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
             cost: LaunchCost) -> float:
     """:func:`_trace_pass`, its seconds (returned) and whether it recorded added to ``cost``."""
     begin, recorded = time.perf_counter(), recordings()
-    _trace_pass(passes, tracer, xy, spp, launch, half)
+    with kernel_seconds() as spent:
+        _trace_pass(passes, tracer, xy, spp, launch, half)
     seconds = time.perf_counter() - begin
-    cost.add(spp, seconds, recordings() > recorded)
+    cost.add(spp, seconds, recordings() > recorded, spent.compile)
     return seconds
 
 
@@ -551,8 +561,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # the spp gave 1.3-1.6x the error of one on such scenes); under a deadline
     # a sampler that compiles kernels per spp traces every pass at 1 spp
     # instead (a new spp's compilation would overrun it), a half a launch
-    split = deadline is None or not sampler_bakes_spp(tracer.sensor.sampler())
-    cost = LaunchCost() if cost is None else cost
+    bakes = sampler_bakes_spp(tracer.sensor.sampler())
+    split = deadline is None or not bakes
+    cost = LaunchCost(spp_compiles=bakes) if cost is None else cost
     # A time limit alone needs no estimates: the passes fill the time, in one
     # half, and leave the last OIDN call its expected time; the first launch
     # is of 1 spp, or as large as earlier renders' launches say fits

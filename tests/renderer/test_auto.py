@@ -352,6 +352,7 @@ def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scen
 
 
 def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, monkeypatch):
+    monkeypatch.setattr(auto, "_launch_costs", {})  # (not earlier tests' launches)
     first = mitsuba_mrt.render(scene, time_limit=10.0)  # passes: their launches are kept
     assert first.auto.choice.kind == "denoised"
     monkeypatch.setattr(auto, "_first_round_s", {})  # no first round's time to go by
@@ -625,6 +626,22 @@ def test_a_time_limit_s_first_launch_is_sized_by_earlier_renders_launches(timed_
         assert clock[0] <= 30.0
     # the second knows the line (1 s + 1 s an spp): 30 / 1.15 holds 25 spp at once
     assert launched[0] == 25 and sum(launched) >= 25
+
+
+@pytest.mark.parametrize("spp_compiles", [False, True])
+def test_a_first_launch_s_compilation_is_a_new_spp_s_cost_only_where_the_sampler_bakes_spp(
+        spp_compiles):
+    from mitsuba_mrt.renderer import progressive
+
+    cost = progressive.LaunchCost(spp_compiles=spp_compiles)
+    # a process's first launch compiled its kernels (0.4 s of its 0.6 s), the next replayed
+    cost.add(8, 0.6, recorded=True, compile_s=0.4)
+    cost.add(8, 0.16)
+    # the line through the replayed launch: 0.02 s an spp; a new spp records anew, and
+    # compiles again only where the sampler bakes its spp into the kernels
+    assert cost.record_s == pytest.approx(0.44 if spp_compiles else 0.04)
+    assert cost(1) == pytest.approx(0.02 + cost.record_s)
+    assert cost.launches[0][1] == pytest.approx(0.6 if spp_compiles else 0.2)
 
 
 def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
