@@ -8,9 +8,11 @@
    installed, at least :data:`HOME_MIN_SPP` spp: an MRT image where the
    scene's kind says it wins (:func:`unmeasured_plan`): :data:`HOME` (mode
    ``idpass``, its grid denoised) on the report's kind of scene (every
-   surface diffuse, every light a point) and on images of
-   :data:`WIDE_PIXELS` or more lit by no environment map whose id pass has
-   at most :data:`WIDE_EDGE_SHARE` of its pixels at an edge between ids;
+   surface diffuse, every light a point), and where no environment map
+   lights the scene on images of :data:`WIDE_PIXELS` or more and on smaller
+   ones with a textured diffuse surface and no surface that transmits light,
+   each where its id pass has at most :data:`WIDE_EDGE_SHARE` of its pixels
+   at an edge between ids;
    :data:`SKY` (mode ``refine``, its grid denoised) under an environment
    map.  The image is kept where its held-out check (:mod:`.held_out`,
    :func:`keeps`) finds it near a full render's quality, else the passes
@@ -57,7 +59,7 @@ from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings
 from .scene_query import (environment_map, lit_diffuse_by_points, sampler_bakes_spp,
-                          textured_diffuse_shapes)
+                          textured_diffuse_shapes, transmits)
 from .trace import trace_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
@@ -116,6 +118,17 @@ HOME_MIN_SPP = 16
 #: alternative on five of nine gallery scenes).
 WIDE_PIXELS = 1 << 18
 WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, denoised grid"
+#: :data:`HOME` on a smaller image where a diffuse surface is textured
+#: (:func:`~.scene_query.textured_diffuse_shapes`) and no surface transmits
+#: light (:func:`~.scene_query.transmits`): the id pass gives the texture at
+#: every pixel and the grid only the shading beneath it, which is smooth.
+#: Through glass the ids see one shape where an image of the scene lies
+#: (``room`` at 256 px: the check rejects ``idpass+oidn``, then the passes).
+TEXTURED_REASON = ("textured diffuse surfaces, nothing transmits light: the MRT's id pass "
+                   "gives the texture, denoised grid")
+#: The reasons whose plan first traces the id pass and gives way to the
+#: passes where too many of its pixels lie at an edge (:func:`_too_many_edges`).
+EDGE_TESTED = (WIDE_REASON, TEXTURED_REASON)
 #: :data:`HOME` on such an image is traced only where at most this share of
 #: its pixels lie at an edge between ids (:func:`~mitsuba_mrt.recon.ids.edge_share`
 #: of the id pass, which ``idpass`` then reuses): where more do, the regions
@@ -325,14 +338,14 @@ def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, note
                  probe_start: float) -> tuple[AutoOutcome | None, SparseTrace | None]:
     """(the outcome of :func:`unmeasured_plan`'s MRT plan, its image to be
     checked, or None: the passes; the image's id pass where the plan traced
-    it).  A large image's plan (:data:`WIDE_REASON`) traces the id pass first
-    and gives way to the passes, with a note, where more than
+    it).  A large or textured image's plan (:data:`EDGE_TESTED`) traces the
+    id pass first and gives way to the passes, with a note, where more than
     :data:`WIDE_EDGE_SHARE` of its pixels lie at an edge between ids."""
     chosen = unmeasured_plan(scene, width * height)
     if chosen is None:
         return None, None
     id_pass = None
-    if chosen[1] == WIDE_REASON:
+    if chosen[1] in EDGE_TESTED:
         id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
         if _too_many_edges(id_pass, params, width, height, notes):
             return None, id_pass
@@ -344,7 +357,7 @@ def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, note
 def _too_many_edges(id_pass: SparseTrace, params: MRTParams, width: int, height: int,
                     notes: list) -> bool:
     """Whether more than :data:`WIDE_EDGE_SHARE` of the id pass's pixels lie at
-    an edge between ids (too many for :data:`WIDE_REASON`'s plan: a note says so)."""
+    an edge between ids (too many for :data:`EDGE_TESTED`'s plans: a note says so)."""
     share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
     if share > WIDE_EDGE_SHARE:
         notes.append(f"{share:.1%} of the pixels at an edge between ids: "
@@ -404,7 +417,11 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
         return HOME, HOME_REASON
     if environment_map(scene):
         return SKY, SKY_REASON
-    return (HOME, WIDE_REASON) if pixels >= WIDE_PIXELS else None
+    if pixels >= WIDE_PIXELS:
+        return HOME, WIDE_REASON
+    if textured_diffuse_shapes(scene).any() and not transmits(scene):
+        return HOME, TEXTURED_REASON
+    return None
 
 
 def _surfaces(scene, tracer, width: int, height: int,
@@ -486,7 +503,7 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + rest > end:
         return None, None, probed
     id_pass = _id_pass(tracer, width, height)
-    if chosen[1] == WIDE_REASON and _too_many_edges(id_pass, params, width, height, notes):
+    if chosen[1] in EDGE_TESTED and _too_many_edges(id_pass, params, width, height, notes):
         return None, id_pass, probed
     if time.perf_counter() + rest > end:
         return None, id_pass, probed

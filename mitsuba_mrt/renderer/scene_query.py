@@ -39,6 +39,16 @@ def has_delta_lobes(scene: mi.Scene) -> bool:
     return any(shows(scene, lambda shape: delta(shape.bsdf()), any))
 
 
+def transmits(scene: mi.Scene) -> bool:
+    """True if a shape of ``scene`` has a BSDF that transmits light (glass, a
+    rough or thin dielectric): what is seen through it is an image of the
+    scene behind, which no id tells apart."""
+    def through(bsdf) -> bool:
+        return bsdf is not None and mi.has_flag(int(bsdf.flags()), mi.BSDFFlags.Transmission)
+
+    return any(shows(scene, lambda shape: through(shape.bsdf()), any))
+
+
 def sampler_bakes_spp(sampler: mi.Sampler) -> bool:
     """Whether ``sampler``'s arithmetic bakes its sample count into the
     kernels (all of Mitsuba's but ``independent``: ``stratified``,

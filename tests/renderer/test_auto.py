@@ -400,6 +400,24 @@ def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
     assert not textured_diffuse_shapes(plain).any() and not mitsuba_mrt.render(plain).auto.choice.shading
 
 
+def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_light(variant):
+    from mitsuba_mrt.renderer.scene_query import transmits
+
+    gallery = ROOT / "scenes_xml/gallery"
+    checker = mitsuba_mrt.load_scene(gallery / "checker_border.xml", res=256, spp=32)
+    assert not transmits(checker)
+    assert auto.unmeasured_plan(checker, 256 * 256) == (auto.HOME, auto.TEXTURED_REASON)
+    # few edges between ids (the border's), and the check keeps the image
+    result = mitsuba_mrt.render(checker)
+    assert result.mode_used == "idpass" and result.auto.reason == auto.TEXTURED_REASON
+    assert not result.auto.notes and np.isfinite(result.image).all()
+    # the room's glass shows what lies behind it, which no id tells apart
+    room = mitsuba_mrt.load_scene(gallery / "room.xml", res=128)
+    assert transmits(room) and auto.unmeasured_plan(room, 128 * 128) is None
+    # at 512 x 512 the room's kind no longer matters
+    assert auto.unmeasured_plan(room, 512 * 512) == (auto.HOME, auto.WIDE_REASON)
+
+
 def test_a_time_limit_is_filled_with_passes(scene):
     quick = mitsuba_mrt.render(scene, time_limit=1e-6)
     longer = mitsuba_mrt.render(scene, time_limit=50 * quick.timings.total)
