@@ -33,20 +33,22 @@ def has_delta_lobes(scene: mi.Scene) -> bool:
     """True if a shape of ``scene`` has a BSDF that may sample a delta lobe
     (a mirror, glass, a smooth coating): a sample's albedo follows those
     bounces (:func:`~mitsuba_mrt.renderer.develop._albedo_along`)."""
-    def delta(bsdf) -> bool:
-        return bsdf is not None and mi.has_flag(int(bsdf.flags()), mi.BSDFFlags.Delta)
-
-    return any(shows(scene, lambda shape: delta(shape.bsdf()), any))
+    return _any_bsdf_with(scene, mi.BSDFFlags.Delta)
 
 
 def transmits(scene: mi.Scene) -> bool:
     """True if a shape of ``scene`` has a BSDF that transmits light (glass, a
     rough or thin dielectric): what is seen through it is an image of the
     scene behind, which no id tells apart."""
-    def through(bsdf) -> bool:
-        return bsdf is not None and mi.has_flag(int(bsdf.flags()), mi.BSDFFlags.Transmission)
+    return _any_bsdf_with(scene, mi.BSDFFlags.Transmission)
 
-    return any(shows(scene, lambda shape: through(shape.bsdf()), any))
+
+def _any_bsdf_with(scene: mi.Scene, flag: mi.BSDFFlags) -> bool:
+    """True if a shape of ``scene`` has a BSDF with ``flag`` among its lobes' flags."""
+    def has(bsdf) -> bool:
+        return bsdf is not None and mi.has_flag(int(bsdf.flags()), flag)
+
+    return any(shows(scene, lambda shape: has(shape.bsdf()), any))
 
 
 def sampler_bakes_spp(sampler: mi.Sampler) -> bool:
