@@ -183,6 +183,11 @@ _first_round_s: dict = {}
 #: the next render's passes plan from.
 _launch_costs: dict = {}
 KEPT_COSTS = 16
+#: What the grid probe took beyond its kernels when it recorded them, per
+#: the same keys (the last :data:`KEPT_COSTS`): about what the passes' first
+#: launch adds by recording theirs (both trace the integrator anew), which
+#: a replayed probe's time does not show.
+_probe_recording_s: dict = {}
 
 
 @dataclass
@@ -398,7 +403,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         return (AutoOutcome(preview) if due else None), None, False
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
-    grid, pass_s = probed.grid, probed.pass_s
+    grid, pass_s = probed.grid, probed.pass_s + _passes_recording_s(key, probed)
 
     def due() -> bool:
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
@@ -408,6 +413,25 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     # the passes' textured pixels, then the same question with their time spent
     surfaces = _surfaces(scene, tracer, width, height, id_pass)
     return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
+
+
+def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
+    """What the passes' first launch for ``key`` is expected to add to the
+    pass ``probed`` predicts by recording its kernels: 0 where the passes have
+    launched for ``key`` before (they replay) or the probe itself recorded
+    (its time holds a recording); else what the probe's recording took
+    beyond its replays (:data:`_probe_recording_s`), kept from the render
+    whose probe recorded."""
+    if probed.recorded:
+        _probe_recording_s.pop(key, None)
+        _probe_recording_s[key] = probed.host
+        for old in list(_probe_recording_s)[:-KEPT_COSTS]:
+            del _probe_recording_s[old]
+        return 0.0
+    launches = _launch_costs.get(key)
+    if launches is not None and launches.launches:
+        return 0.0
+    return max(_probe_recording_s.get(key, 0.0) - probed.host, 0.0)
 
 
 def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | None:

@@ -364,6 +364,36 @@ def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, 
     assert again.auto.choice.kind == "denoised"
 
 
+def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_launched(
+        monkeypatch):
+    monkeypatch.setattr(auto, "_launch_costs", {})
+    monkeypatch.setattr(auto, "_probe_recording_s", {})
+
+    def probe(recorded, host):
+        return auto._Probe(None, host + 0.01, 0.005, host, recorded)
+    key = ("scene", "sensor", "integrator", 256 * 256)
+    # a recording probe's own time holds a recording: nothing to add, its time is kept
+    assert auto._passes_recording_s(key, probe(True, 0.030)) == 0.0
+    # a replayed probe's does not: the passes' first launch adds what recording took more
+    assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
+    assert auto._passes_recording_s(("other",) + key[1:], probe(False, 0.004)) == 0.0
+    auto._kept_cost(key, _independent_tracer()).add(1, 0.02, recorded=True)
+    assert auto._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
+
+
+def _independent_tracer():
+    """A stand-in with what :func:`auto._kept_cost` reads: an ``independent`` sampler."""
+    sampler = mi.load_dict({"type": "independent"})
+
+    class Sensor:
+        def sampler(self):
+            return sampler
+
+    class Tracer:
+        sensor = Sensor()
+    return Tracer()
+
+
 def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
     chosen = mitsuba_mrt.render(scene).auto.choice
     assert chosen.kind == "denoised" and chosen.quality in ("fast", "high")
