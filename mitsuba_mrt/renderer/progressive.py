@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -42,7 +43,7 @@ from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..runtime.jit import kernel_seconds
 from ..types import SeedStream
-from .replay import recordings
+from .replay import recording_seconds, recordings
 from .scene_query import sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
@@ -88,11 +89,11 @@ ESTIMATE_CLIP = 1.0
 #: for long.
 KEPT_LAUNCHES = 8
 
-#: A 1-spp launch's share that is its fixed part, until a launch of more
-#: spp measures it (0.1-0.7 on the gallery at 256 px): where it is less, a
-#: launch of k spp takes up to 1 / (1 - this) times what the line says
-#: (``spot_textures``, 0.11: 1.16 times at 4 spp), and one such launch
-#: measures the line.
+#: A 1-spp launch's share that is its fixed part, where neither a launch of
+#: more spp nor its kernels' run time measured it (0.1-0.7 on the gallery
+#: at 256 px): where it is less, a launch of k spp takes up to
+#: 1 / (1 - this) times what the line says (``spot_textures``, 0.11: 1.16
+#: times at 4 spp), and one such launch measures the line.
 ONE_SIZE_FIXED = 0.25
 
 #: Whether the passes denoise the textured diffuse surfaces as their shading
@@ -385,22 +386,40 @@ def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: floa
                          expected_seconds(pixels, "high"))
 
 
+class Launch(NamedTuple):
+    """One launch of passes, as :class:`LaunchCost` keeps it: its spp and
+    seconds, whether it recorded its kernels' replay (:mod:`.replay`), its
+    kernels' run time, what recording added to it (None: not measured) and
+    whether it was the first launch its cost saw (whose recording also paid
+    for first uses)."""
+
+    spp: int
+    seconds: float
+    recorded: bool = False
+    execute: float | None = None
+    first: bool = False
+    recording: float | None = None
+
+
 @dataclass
 class LaunchCost:
     """What a launch of passes costs: ``fixed + per_spp * spp`` seconds, the
-    line through the replayed launches so far (``launches``: (spp, seconds,
-    whether it recorded its kernels' replay, :mod:`.replay`)) moved up until
-    none took longer than it says; a launch of an spp not launched before
-    records anew, which adds :attr:`record_s`.  Where a new spp compiles no
-    kernel (``spp_compiles`` False: a sampler that does not bake its spp in,
+    line through the replayed launches so far (``launches``: :class:`Launch`
+    records, or plain (spp, seconds, recorded) tuples) moved up until none
+    took longer than it says; a launch of an spp not launched before records
+    anew, which adds :attr:`record_s`.  Where a new spp compiles no kernel
+    (``spp_compiles`` False: a sampler that does not bake its spp in,
     :func:`~.scene_query.sampler_bakes_spp`), what a launch spent compiling
     (a process's first, or the disk cache's first) is left out of its time.
 
     A launch's fixed part (its kernels' start, reading every pixel back)
-    makes a 1-spp launch cost about two of a larger launch's spp; with only
-    1-spp launches measured it is taken as :data:`ONE_SIZE_FIXED` of theirs
-    (so that a larger launch is tried, and measures the line), with another
-    single size measured as 0 (every spp costs what that launch's did).
+    makes a 1-spp launch cost about two of a larger launch's spp.  Where the
+    launches so far have one size, the part of them that is not their
+    kernels' run time is taken as the fixed part (the run time also has a
+    part that does not grow with the spp, so this line overestimates larger
+    launches, never smaller ones by much); where that was not measured, a
+    1-spp launch's fixed part is taken as :data:`ONE_SIZE_FIXED` of it, and
+    another single size's as 0.
 
     Examples
     --------
@@ -412,7 +431,15 @@ class LaunchCost:
     >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
     (0.078, 3)
 
-    A recorded launch's time tells what recording adds, not the line:
+    The kernels' run time splits a single size's launches (here a fixed
+    0.012 s, and at most 0.008 s an spp):
+
+    >>> cost = LaunchCost([Launch(1, 0.02, False, 0.006), Launch(1, 0.018, False, 0.006)])
+    >>> round(cost(4), 3), cost.fits(0.05)
+    (0.044, 4)
+
+    A recorded launch's time tells what recording adds, not the line, and a
+    cost's first launch tells it only until another launch has recorded:
 
     >>> cost = LaunchCost([(1, 0.045, True), (1, 0.020, False), (2, 0.040, True)])
     >>> round(cost.record_s, 3), cost.fits(0.1)
@@ -422,49 +449,72 @@ class LaunchCost:
     launches: list = field(default_factory=list)
     spp_compiles: bool = True
 
+    def __post_init__(self):
+        self.launches = [Launch(*launch) for launch in self.launches]
+
     def add(self, spp: int, seconds: float, recorded: bool = False,
-            compile_s: float = 0.0) -> None:
-        """Add a launch (``compile_s``: what of it compiled kernels); only the
-        last :data:`KEPT_LAUNCHES` are kept."""
+            compile_s: float = 0.0, execute_s: float | None = None,
+            first: bool = False, recording_s: float | None = None) -> None:
+        """Add a launch (``compile_s``: what of it compiled kernels;
+        ``execute_s``: its kernels' run time; ``first``: the first launch of
+        its kind in this process; ``recording_s``: what it spent recording
+        its kernels' replay); only the last :data:`KEPT_LAUNCHES` are kept."""
         if not self.spp_compiles:
             seconds -= compile_s
-        self.launches.append((int(spp), float(seconds), bool(recorded)))
+        self.launches.append(Launch(
+            int(spp), float(seconds), bool(recorded), None if not execute_s else float(execute_s),
+            bool(first), None if not recorded or recording_s is None
+            else float(np.clip(recording_s, 0.0, seconds))))
         del self.launches[:-KEPT_LAUNCHES]
 
     def _line(self) -> tuple[float, float]:
         """(fixed, per_spp) of a replayed launch: through the replayed
         launches (all of them where none was)."""
-        points = [(s, t) for s, t, recorded in self.launches if not recorded] or [
-            (s, t) for s, t, _ in self.launches]
+        points = [launch for launch in self.launches if not launch.recorded] or [
+            launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
+            for launch in self.launches]  # (a replay: less what recording took)
         if not points:
             return 0.0, 0.0
-        spp, seconds = (np.array(v, dtype=float) for v in zip(*points))
-        fixed = ONE_SIZE_FIXED * float(seconds.min()) if set(spp) == {1} else 0.0
+        spp = np.array([launch.spp for launch in points], dtype=float)
+        seconds = np.array([launch.seconds for launch in points])
         if len(set(spp)) > 1:
             fixed = float(np.clip(np.polyfit(spp, seconds, 1)[1], 0.0, seconds.min()))
+        elif all(launch.execute is not None for launch in points):
+            fixed = float(np.clip(min(launch.seconds - launch.execute for launch in points),
+                                  0.0, seconds.min()))
+        else:
+            fixed = ONE_SIZE_FIXED * float(seconds.min()) if set(spp) == {1} else 0.0
         return fixed, float(((seconds - fixed) / spp).max())
 
     @property
     def replayed(self) -> bool:
         """Whether some launch replayed its kernels (the line is a launch's cost)."""
-        return not all(recorded for _, _, recorded in self.launches)
+        return not all(launch.recorded for launch in self.launches)
 
     @property
     def record_s(self) -> float:
-        """What recording adds to a launch: what the last recorded launch took
-        beyond the line (0 where no launch, or every launch, recorded); the
-        first launch of a process also pays for first uses, once."""
+        """What recording adds to a launch: what the last recorded launch
+        spent recording (where measured, else what it took beyond the line),
+        other than a first launch where another recorded (its recording also
+        paid for first uses, once); 0 where no launch recorded, or every
+        launch did and none measured it."""
+        recorded = [launch for launch in self.launches if launch.recorded]
+        recorded = [launch for launch in recorded if not launch.first] or recorded
+        if not recorded:
+            return 0.0
+        last = recorded[-1]
+        if last.recording is not None:
+            return last.recording
         if not self.replayed:
             return 0.0
         fixed, per_spp = self._line()
-        excess = [t - fixed - per_spp * s for s, t, recorded in self.launches if recorded]
-        return max(excess[-1], 0.0) if excess else 0.0
+        return max(last.seconds - fixed - per_spp * last.spp, 0.0)
 
     def __call__(self, spp: int) -> float:
         """Seconds a launch of ``spp`` is expected to take (recorded anew
         where no launch had that spp)."""
         fixed, per_spp = self._line()
-        new = all(spp != s for s, _, _ in self.launches)
+        new = all(spp != launch.spp for launch in self.launches)
         return fixed + per_spp * spp + (self.record_s if new else 0.0)
 
     def fits(self, seconds: float) -> int:
@@ -472,7 +522,8 @@ class LaunchCost:
         fixed, per_spp = self._line()
         if per_spp <= 0:
             return 0
-        launched = [s for s, _, _ in self.launches if fixed + per_spp * s <= seconds]
+        launched = [launch.spp for launch in self.launches
+                    if fixed + per_spp * launch.spp <= seconds]
         anew = int((seconds - self.record_s - fixed) // per_spp)
         return max(launched + [anew, 0])
 
@@ -515,11 +566,13 @@ def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int,
 def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half: int | None,
             cost: LaunchCost) -> float:
     """:func:`_trace_pass`, its seconds (returned) and whether it recorded added to ``cost``."""
-    begin, recorded = time.perf_counter(), recordings()
+    begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
     with kernel_seconds() as spent:
         _trace_pass(passes, tracer, xy, spp, launch, half)
     seconds = time.perf_counter() - begin
-    cost.add(spp, seconds, recordings() > recorded, spent.compile)
+    # (a recording call traces the kernels; they run, or compile, when read back after)
+    cost.add(spp, seconds, recordings() > recorded, spent.compile, spent.execute,
+             first=not cost.launches, recording_s=recording_seconds() - recording)
     return seconds
 
 

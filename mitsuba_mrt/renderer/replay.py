@@ -32,6 +32,7 @@ import contextlib
 import itertools
 import math
 import sys
+import time
 from collections import OrderedDict
 from typing import Callable
 
@@ -56,6 +57,8 @@ _held: OrderedDict = OrderedDict()
 _replaying = [True]
 #: Every :class:`Replay` made (one per kernel function).
 _instances: list = []
+#: Seconds spent in calls that made a recording.
+_recording_seconds = [0.0]
 
 
 @contextlib.contextmanager
@@ -80,6 +83,13 @@ def replaying(enabled: bool):
 def recordings() -> int:
     """How many recordings every :class:`Replay` has made so far (kept or dropped)."""
     return sum(replay.n_recordings for replay in _instances)
+
+
+def recording_seconds() -> float:
+    """Seconds spent so far in calls that made a recording: tracing the
+    kernel function (its kernels compile and run when their outputs are
+    read, mostly after the call)."""
+    return _recording_seconds[0]
 
 
 def active() -> bool:
@@ -165,11 +175,15 @@ class Replay:
             if len(self.frozen) > RECORDINGS:
                 self._dropped += self.frozen.popitem(last=False)[1].n_recordings
         self.frozen.move_to_end(key)
+        made, begin = frozen.n_recordings, time.perf_counter()
         try:
             return frozen(*args)
         except RuntimeError:  # Dr.Jit cannot record or replay these inputs
             self._failed.add(key)
             return self.plain(*args)
+        finally:
+            if frozen.n_recordings > made:
+                _recording_seconds[0] += time.perf_counter() - begin
 
 
 def _token(objects: tuple) -> int:

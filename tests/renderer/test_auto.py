@@ -640,7 +640,8 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(timed_trac
     expected = {(False, False): [1] * 6, (False, True): [10], (True, True): [10]}
     assert launched[1:] == expected[halves, any_spp] and clock[0] <= start + 13.0
     assert passes.count == 2 + sum(launched[1:]) and progress.spp == passes.count
-    assert cost.launches[2:] == [(s, 1.0 + s, False) for s in launched[1:]]
+    assert [launch[:3] for launch in cost.launches[2:]] == [(s, 1.0 + s, False)
+                                                            for s in launched[1:]]
     # halves from a launch's odd and even samples are as large as each other
     if halves:
         assert passes.half_counts == [6, 6]
@@ -690,6 +691,34 @@ def test_a_first_launch_s_compilation_is_a_new_spp_s_cost_only_where_the_sampler
     assert cost.record_s == pytest.approx(0.44 if spp_compiles else 0.04)
     assert cost(1) == pytest.approx(0.02 + cost.record_s)
     assert cost.launches[0][1] == pytest.approx(0.6 if spp_compiles else 0.2)
+
+
+def test_a_first_launch_s_recording_is_a_new_spp_s_cost_only_until_another_records():
+    from mitsuba_mrt.renderer import progressive
+
+    cost = progressive.LaunchCost(spp_compiles=False)
+    # a process's first launch recorded, and paid for first uses too; the next replayed
+    cost.add(1, 0.05, recorded=True, first=True)
+    cost.add(1, 0.02)
+    assert cost.record_s == pytest.approx(0.05 - 0.02)  # all there is to go by
+    cost.add(2, 0.03, recorded=True)  # a new spp's recording: less than the line says
+    assert cost.record_s == 0.0 and cost(4) == pytest.approx(0.005 + 4 * 0.015)
+
+
+def test_a_launch_s_kernels_run_time_and_the_cost_s_first_launch_are_kept(scene, monkeypatch):
+    from mitsuba_mrt.renderer import progressive
+
+    from mitsuba_mrt.renderer.replay import clear_recordings
+
+    kept = progressive.LaunchCost(spp_compiles=False)
+    monkeypatch.setattr(auto, "_kept_cost", lambda key, tracer: kept)
+    clear_recordings()  # (the first launch records its replay, and measures that)
+    mitsuba_mrt.render(scene, time_limit=10.0)
+    first, *rest = kept.launches
+    assert first.first and first.recorded and 0 < first.recording < first.seconds
+    assert not any(launch.first for launch in rest)
+    assert all(0 < launch.execute < launch.seconds for launch in kept.launches)
+    assert all(launch.recording is None for launch in rest if not launch.recorded)
 
 
 def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
