@@ -398,7 +398,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     launches = _launch_costs.get(key)
     if first_s is None and launches is not None and launches.replayed:
         # earlier passes measured a pass (a probe can record its kernels anew)
-        first_s = time.perf_counter() - started + launches(1)
+        first_s = time.perf_counter() - started + launches(launches.cheapest())
     if first_s is not None:
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         return (AutoOutcome(preview) if due else None), None, False

@@ -9,7 +9,7 @@ left of it), or the spp reach the cap; then the mean of the passes goes
 through OIDN once (with ``quality="auto"`` at the preset
 :func:`final_quality` picks).  A round is one launch, its odd and even samples its
 two halves (under a time limit, a sampler that compiles kernels per spp
-traces 1-spp launches instead, each into one half).  Blender Cycles'
+launches the spp whose kernels it has, as far as it can).  Blender Cycles'
 time limit and noise threshold work the same way.
 
 The error needs no reference: after a round of ``k`` passes, the mean of
@@ -44,7 +44,7 @@ from ..recon.sampling import every_pixel
 from ..runtime.jit import kernel_seconds
 from ..types import SeedStream
 from .replay import recording_seconds, recordings
-from .scene_query import sampler_bakes_spp
+from .scene_query import sample_count_at_most, sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
 FIRST_ROUND = 2
@@ -444,10 +444,16 @@ class LaunchCost:
     >>> cost = LaunchCost([(1, 0.045, True), (1, 0.020, False), (2, 0.040, True)])
     >>> round(cost.record_s, 3), cost.fits(0.1)
     (0.005, 6)
+
+    Where a new spp compiles, only the spp launched before are planned:
+
+    >>> cost = LaunchCost([(1, 0.02, False), (4, 0.05, False)], spp_compiles=True)
+    >>> cost.fits(0.1), cost.cheapest(), cost(2)
+    (4, 1, inf)
     """
 
     launches: list = field(default_factory=list)
-    spp_compiles: bool = True
+    spp_compiles: bool = False
 
     def __post_init__(self):
         self.launches = [Launch(*launch) for launch in self.launches]
@@ -458,9 +464,12 @@ class LaunchCost:
         """Add a launch (``compile_s``: what of it compiled kernels;
         ``execute_s``: its kernels' run time; ``first``: the first launch of
         its kind in this process; ``recording_s``: what it spent recording
-        its kernels' replay); only the last :data:`KEPT_LAUNCHES` are kept."""
+        its kernels' replay, to which a new spp's compilation adds where
+        ``spp_compiles``); only the last :data:`KEPT_LAUNCHES` are kept."""
         if not self.spp_compiles:
             seconds -= compile_s
+        elif recording_s is not None:
+            recording_s += compile_s
         self.launches.append(Launch(
             int(spp), float(seconds), bool(recorded), None if not execute_s else float(execute_s),
             bool(first), None if not recorded or recording_s is None
@@ -493,11 +502,12 @@ class LaunchCost:
 
     @property
     def record_s(self) -> float:
-        """What recording adds to a launch: what the last recorded launch
-        spent recording (where measured, else what it took beyond the line),
-        other than a first launch where another recorded (its recording also
-        paid for first uses, once); 0 where no launch recorded, or every
-        launch did and none measured it."""
+        """What recording adds to a launch of a new spp: what the last
+        recorded launch spent recording (where measured, else what it took
+        beyond the line; with its compilation where ``spp_compiles``), other
+        than a first launch where another recorded (its recording also paid
+        for first uses, once); 0 where no launch recorded, or every launch
+        did and none measured it."""
         recorded = [launch for launch in self.launches if launch.recorded]
         recorded = [launch for launch in recorded if not launch.first] or recorded
         if not recorded:
@@ -510,36 +520,57 @@ class LaunchCost:
         fixed, per_spp = self._line()
         return max(last.seconds - fixed - per_spp * last.spp, 0.0)
 
+    def _new(self, spp: int) -> bool:
+        return all(spp != launch.spp for launch in self.launches)
+
+    def _unplanned(self, spp: int) -> bool:
+        """Whether ``spp`` is not planned: a new spp where it compiles
+        (``spp_compiles``) and some spp has been launched.  Whether its
+        kernels come from Dr.Jit's disk cache or compile (several seconds
+        for some scenes) no recording tells."""
+        return self.spp_compiles and bool(self.launches) and self._new(spp)
+
     def __call__(self, spp: int) -> float:
         """Seconds a launch of ``spp`` is expected to take (recorded anew
-        where no launch had that spp)."""
+        where no launch had that spp; infinite where :meth:`_unplanned`)."""
+        if self._unplanned(spp):
+            return math.inf
         fixed, per_spp = self._line()
-        new = all(spp != launch.spp for launch in self.launches)
-        return fixed + per_spp * spp + (self.record_s if new else 0.0)
+        return fixed + per_spp * spp + (self.record_s if self._new(spp) else 0.0)
+
+    def cheapest(self) -> int:
+        """The spp of the launch expected to cost least, of 1 and those
+        launched before (only those where a new spp compiles)."""
+        sizes = [1] + [launch.spp for launch in self.launches]
+        return min((spp for spp in sizes if not self._unplanned(spp)),
+                   key=lambda spp: (self(spp), spp))
 
     def fits(self, seconds: float) -> int:
-        """The most spp a launch expected to take at most ``seconds`` may have."""
+        """The most spp a launch expected to take at most ``seconds`` may
+        have (only those launched before where a new spp compiles)."""
         fixed, per_spp = self._line()
         if per_spp <= 0:
             return 0
         launched = [launch.spp for launch in self.launches
                     if fixed + per_spp * launch.spp <= seconds]
-        anew = int((seconds - self.record_s - fixed) // per_spp)
-        return max(launched + [anew, 0])
+        anew = [] if self.spp_compiles and self.launches else [
+            int((seconds - self.record_s - fixed) // per_spp)]
+        return max(launched + anew + [0])
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
-          cost: LaunchCost, max_spp: int, launch: int, halves: bool, any_spp: bool) -> None:
+          cost: LaunchCost, max_spp: int, launch: int, halves: bool, exact=None) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
     value) that a whole round does not: launches of the most spp that
-    ``cost`` expects to end by then (times :data:`ROUND_SAFETY`), while one
-    does; with ``any_spp`` of any count (a new count is recorded before it
-    is replayed: the safety's share), else of one spp each.  With
-    ``halves`` each launch goes into both halves (at least 2 spp), else
+    ``cost`` expects to end by then (times :data:`ROUND_SAFETY`; a new count
+    records, or compiles, before it replays), while one does, each of the
+    count ``exact(spp)`` the sampler takes (:func:`~.scene_query.sample_count_at_most`).
+    With ``halves`` each launch goes into both halves (at least 2 spp), else
     into one half and the next into the other."""
     while passes.count < max_spp:
         fits = cost.fits((until - time.perf_counter()) / ROUND_SAFETY)
-        spp = min(max_spp - passes.count, fits if any_spp else min(fits, 1))
+        spp = min(max_spp - passes.count, fits)
+        spp = exact(spp) if exact is not None and spp > 0 else spp
         if spp < (2 if halves else 1):
             return
         progress.trace_s += _launch(passes, tracer, xy, spp, launch,
@@ -548,31 +579,29 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
         progress.spp = passes.count
 
 
-def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int, split: bool,
-                 estimates: bool, cost: LaunchCost) -> int:
-    """A round of ``size`` passes (from launch number ``launch``; the next
-    launch's number is returned), each launch's time added to ``cost``: with
-    ``split`` one launch, its halves its odd and even samples (without
-    ``estimates``, all of it into half 0), else a launch a pass, the first
-    half of them into half 0."""
-    launches = [(size, None if estimates else 0)] if split else [
-        (1, 2 * k // size) for k in range(size)]
-    for spp, half in launches:
-        _launch(passes, tracer, xy, spp, launch, half, cost)
-        launch += 1
-    return launch
+def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int,
+                 halves: bool, cost: LaunchCost) -> int:
+    """A round of ``size`` passes in one launch (number ``launch``; the next
+    launch's number is returned), its time added to ``cost``: with
+    ``halves`` its odd and even samples are the two halves, else all of it
+    goes into half 0."""
+    _launch(passes, tracer, xy, size, launch, None if halves else 0, cost)
+    return launch + 1
 
 
 def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half: int | None,
             cost: LaunchCost) -> float:
     """:func:`_trace_pass`, its seconds (returned) and whether it recorded added to ``cost``."""
     begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
+    count = passes.count
     with kernel_seconds() as spent:
         _trace_pass(passes, tracer, xy, spp, launch, half)
     seconds = time.perf_counter() - begin
-    # (a recording call traces the kernels; they run, or compile, when read back after)
-    cost.add(spp, seconds, recordings() > recorded, spent.compile, spent.execute,
-             first=not cost.launches, recording_s=recording_seconds() - recording)
+    # the spp the sampler took (a square for some); a recording call traces the
+    # kernels, which run, or compile, when read back after it
+    cost.add(passes.count - count, seconds, recordings() > recorded, spent.compile,
+             spent.execute, first=not cost.launches,
+             recording_s=recording_seconds() - recording)
     return seconds
 
 
@@ -592,7 +621,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.  Under a deadline, a
     sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
-    traces every pass at 1 spp, in as many launches.  ``surfaces`` (each
+    launches the spp launched before where they fit, as rounds (both halves,
+    the guides throughout).  ``surfaces`` (each
     pixel's shape index, and per shape index whether it is a textured
     diffuse surface: :func:`~.scene_query.textured_diffuse_shapes`) lets
     the last OIDN call denoise the textured pixels as their shading
@@ -611,25 +641,32 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                          max_spp)
     # a round is one launch, its halves its odd and even samples: a single
     # launch keeps a stratifying sampler's strata whole (two launches of half
-    # the spp gave 1.3-1.6x the error of one on such scenes); under a deadline
-    # a sampler that compiles kernels per spp traces every pass at 1 spp
-    # instead (a new spp's compilation would overrun it), a half a launch
+    # the spp gave 1.3-1.6x the error of one on such scenes)
     bakes = sampler_bakes_spp(tracer.sensor.sampler())
-    split = deadline is None or not bakes
     cost = LaunchCost(spp_compiles=bakes) if cost is None else cost
     # A time limit alone needs no estimates: the passes fill the time, in one
     # half, and leave the last OIDN call its expected time; the first launch
-    # is of 1 spp, or as large as earlier renders' launches say fits
+    # is as large as earlier renders' launches say fits, else the cheapest.
+    # Under a deadline a sampler that compiles kernels per spp keeps the
+    # default rounds' layout (both halves, the guides throughout), so that
+    # the spp launched before replay their kernels (a new spp's compilation
+    # is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not (deadline is not None and target_error is None)
+    as_rounds = estimates or bakes
+    # (under a deadline a launch traces no more spp than planned)
+    exact = (None if deadline is None or not bakes else
+             lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))
     if not estimates:
         oidn_s = expected_seconds(n, quality) if denoise else 0.0
         fits = cost.fits((deadline - time.perf_counter() - oidn_s) / ROUND_SAFETY)
-        round_size = min(max(fits, 1), max_spp) if split else 1
-    passes.guide_spp = max(GUIDE_PASSES, round_size)
+        round_size = min(fits or cost.cheapest(), max_spp)
+        round_size = round_size if exact is None else exact(round_size)
+    passes.guide_spp = max_spp if deadline is not None and bakes else max(GUIDE_PASSES,
+                                                                          round_size)
     while True:
         begin = time.perf_counter()
-        launch = _trace_round(passes, tracer, xy, round_size, launch, split, estimates, cost)
+        launch = _trace_round(passes, tracer, xy, round_size, launch, as_rounds, cost)
         if surfaces is not None and denoise and passes.textured is None \
                 and passes.count == passes.guides:  # the first round: the textured pixels
             passes.textured = textured_pixels(surfaces[0], passes.guide()[0], surfaces[1])
@@ -640,6 +677,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         pass_s = spent / round_size
         progress.spp = passes.count
         next_size = passes.count  # the next round doubles the passes
+        next_size = next_size if exact is None else exact(next_size)
         at_cap = passes.count + next_size > max_spp  # this round is the last
         if estimates and denoise and progress.history and at_cap:
             # its estimate would change no decision: the earlier rounds' predict it
@@ -669,7 +707,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         # without estimates nothing is learnt from rounds: once a launch was
         # replayed (here or by an earlier render: the first, if it recorded,
         # is not a launch's cost), the passes fill the time at once
-        round_s = cost(next_size) if split else next_size * cost(1)
+        round_s = cost(next_size)
         measured = passes.count >= FIRST_ROUND or cost.replayed
         if deadline is not None and ((not estimates and measured) or time.perf_counter()
                                      + ROUND_SAFETY * round_s + oidn_s > deadline):
@@ -678,7 +716,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             left = max(deadline - time.perf_counter() - oidn_s, 0.0)
             final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
             _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
-                  cost, max_spp, launch, halves=split and estimates, any_spp=split)
+                  cost, max_spp, launch, halves=as_rounds, exact=exact)
             break
         round_size = next_size
     image = passes.mean

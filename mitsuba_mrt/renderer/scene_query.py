@@ -73,6 +73,17 @@ def set_sample_count(sampler: mi.Sampler, spp: int) -> int:
     return int(sampler.sample_count())
 
 
+def sample_count_at_most(sampler: mi.Sampler, spp: int) -> int:
+    """The largest sample count of at most ``spp`` (and at least 1) that
+    ``sampler`` takes as it is (``stratified`` and ``multijitter`` round
+    others up to a square): a launch planned to fit a time traces no more."""
+    trial = sampler.clone()
+    count = max(int(spp), 1)
+    while count > 1 and set_sample_count(trial, count) > spp:
+        count -= 1
+    return count
+
+
 def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:
     """Per shape in :func:`ordered_shapes` order, ``combine`` (``any`` or
     ``all``) of ``test`` over the shapes whose BSDFs it shows.

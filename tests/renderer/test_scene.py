@@ -50,3 +50,12 @@ def test_unused_parameters_are_all_named():
     assert scene_module._first_line(error) == \
         "[parser.cpp:111] Found unused parameters: $foo=1, $bar=2"
     assert scene_module._first_line(Exception("one line\nmore")) == "one line"
+
+
+@pytest.mark.parametrize("sampler, expected", [
+    ("independent", [1, 2, 3, 5, 8]), ("stratified", [1, 1, 1, 4, 4])])
+def test_a_launch_planned_for_some_spp_traces_no_more(variant, sampler, expected):
+    from mitsuba_mrt.renderer.scene_query import sample_count_at_most
+
+    taken = [sample_count_at_most(mi.load_dict({"type": sampler}), spp) for spp in (1, 2, 3, 5, 8)]
+    assert taken == expected
