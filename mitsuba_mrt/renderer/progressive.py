@@ -559,19 +559,21 @@ class LaunchCost:
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
-          cost: LaunchCost, max_spp: int, launch: int, halves: bool, exact=None) -> None:
+          cost: LaunchCost, max_spp: int, launch: int, halves: bool, exact=None,
+          least: int = 1) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
     value) that a whole round does not: launches of the most spp that
     ``cost`` expects to end by then (times :data:`ROUND_SAFETY`; a new count
     records, or compiles, before it replays), while one does, each of the
     count ``exact(spp)`` the sampler takes (:func:`~.scene_query.sample_count_at_most`).
-    With ``halves`` each launch goes into both halves (at least 2 spp), else
-    into one half and the next into the other."""
+    With ``halves`` each launch goes into both halves, else into one half
+    and the next into the other; a launch has at least ``least`` spp (2
+    where both halves are to have samples)."""
     while passes.count < max_spp:
         fits = cost.fits((until - time.perf_counter()) / ROUND_SAFETY)
         spp = min(max_spp - passes.count, fits)
         spp = exact(spp) if exact is not None and spp > 0 else spp
-        if spp < (2 if halves else 1):
+        if spp < least:
             return
         progress.trace_s += _launch(passes, tracer, xy, spp, launch,
                                     None if halves else launch % 2, cost)
@@ -716,7 +718,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             left = max(deadline - time.perf_counter() - oidn_s, 0.0)
             final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
             _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
-                  cost, max_spp, launch, halves=as_rounds, exact=exact)
+                  cost, max_spp, launch, halves=as_rounds, exact=exact,
+                  least=2 if estimates else 1)
             break
         round_size = next_size
     image = passes.mean

@@ -630,7 +630,7 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(timed_trac
     cost = progressive.LaunchCost([(1, 2.0, False), (2, 3.0, False)])  # the line 1 + spp
     start = clock[0]
     progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
-                      max_spp=64, launch=1, halves=halves)
+                      max_spp=64, launch=1, halves=halves, least=2 if halves else 1)
     # 13 s left, a launch at most 1 / 1.15 of what is left (the safety): 10 spp
     # (11 s), then none (2 s left, 1.74 s with the safety)
     assert progressive.ROUND_SAFETY == 1.15
@@ -768,6 +768,13 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     assert launched == [9, 9, 4] and clock[0] <= 30.0
     # each as the default rounds were launched: both halves, the guides throughout
     assert kinds == [(True, True)] * 3
+    # where only 1 spp was launched before, the time fills with 1-spp launches
+    launched.clear()
+    clock[0] = 0.0
+    progressive.run_passes(Stratified(), 2, 2, quality="fast", target_error=None,
+                           deadline=10.0, max_spp=64, full_spp=16, area=1.0, denoise=False,
+                           cost=progressive.LaunchCost([(1, 2.0, False)], spp_compiles=True))
+    assert launched == [1, 1, 1, 1] and clock[0] <= 10.0
 
 
 @pytest.mark.parametrize("sampler", ["independent", "stratified"])
