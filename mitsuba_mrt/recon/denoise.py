@@ -122,14 +122,13 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
 
 #: Seconds a call of :func:`denoise_image` takes per pixel and worker thread,
 #: with both guides, before any call in the process has measured it: a
-#: little above what it takes on a 2-core x86 CPU through ``mitsuba-oidn``
-#: (0.64e-6 at ``fast``, 1.2e-6 at ``high``, 256-512 px), so that a first
-#: time-limited render plans for a call no faster than it will be.
-PRIOR_SECONDS = {"fast": 0.75e-6, "balanced": 1.4e-6, "high": 1.4e-6}
+#: little above what it takes on a 2-core x86 CPU (256-512 px), so that a
+#: first time-limited render plans for a call no faster than it will be.
+PRIOR_SECONDS = {"fast": 1.45e-6, "balanced": 2.8e-6, "high": 2.8e-6}
 #: The first call on an image size at a preset takes this share longer than
-#: the next ones (OIDN makes that filter's buffers as it runs; a process's
-#: first call also makes its device): 0.3-0.45 on 2 cores at 256-512 px.
-FIRST_CALL_SHARE = 0.45
+#: the next ones (OIDN makes that filter's buffers as it runs): 0.25-0.35 on
+#: 2 cores at 256-512 px.
+FIRST_CALL_SHARE = 0.35
 
 
 def expected_seconds(pixels: int, quality: str) -> float:
