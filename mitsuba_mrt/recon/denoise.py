@@ -121,9 +121,10 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
 
 
 #: Seconds a call of :func:`denoise_image` takes per pixel and worker thread,
-#: with both guides, before any call in the process has measured it: a
-#: little above what it takes on a 2-core x86 CPU (256-512 px), so that a
-#: first time-limited render plans for a call no faster than it will be.
+#: with both guides, before any call in the process has measured it: about
+#: twice a warm call on a 2-core x86 CPU (256-512 px), as a fresh process's
+#: first call took 1.4-3.2 times one, so that a first time-limited render
+#: plans for a call no faster than it will be.
 PRIOR_SECONDS = {"fast": 1.45e-6, "balanced": 2.8e-6, "high": 2.8e-6}
 #: The first call on an image size at a preset takes this share longer than
 #: the next ones (OIDN makes that filter's buffers as it runs): 0.25-0.35 on
