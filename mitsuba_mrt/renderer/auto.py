@@ -373,12 +373,18 @@ def _too_many_edges(id_pass: SparseTrace, params: MRTParams, width: int, height:
 def _kept_cost(key: tuple, tracer) -> LaunchCost:
     """The launches kept for ``key`` (new where there are none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`."""
-    cost = _launch_costs.pop(key, None) or LaunchCost(
-        spp_compiles=sampler_bakes_spp(tracer.sensor.sampler()))
-    _launch_costs[key] = cost
-    for old in list(_launch_costs)[:-KEPT_COSTS]:
-        del _launch_costs[old]
-    return cost
+    return _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
+        spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))
+
+
+def _keep(table: dict, key: tuple, value):
+    """``value`` kept for ``key`` in ``table`` as its most recently used
+    entry, of the last :data:`KEPT_COSTS`; returned."""
+    table.pop(key, None)
+    table[key] = value
+    for old in list(table)[:-KEPT_COSTS]:
+        del table[old]
+    return value
 
 
 def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
@@ -423,10 +429,7 @@ def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
     beyond its replays (:data:`_probe_recording_s`), kept from the render
     whose probe recorded."""
     if probed.recorded:
-        _probe_recording_s.pop(key, None)
-        _probe_recording_s[key] = probed.host
-        for old in list(_probe_recording_s)[:-KEPT_COSTS]:
-            del _probe_recording_s[old]
+        _keep(_probe_recording_s, key, probed.host)
         return 0.0
     launches = _launch_costs.get(key)
     if launches is not None and launches.launches:

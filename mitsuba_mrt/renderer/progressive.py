@@ -460,12 +460,13 @@ class LaunchCost:
 
     def add(self, spp: int, seconds: float, recorded: bool = False,
             compile_s: float = 0.0, execute_s: float | None = None,
-            first: bool = False, recording_s: float | None = None) -> None:
+            recording_s: float | None = None) -> None:
         """Add a launch (``compile_s``: what of it compiled kernels;
-        ``execute_s``: its kernels' run time; ``first``: the first launch of
-        its kind in this process; ``recording_s``: what it spent recording
-        its kernels' replay, to which a new spp's compilation adds where
-        ``spp_compiles``); only the last :data:`KEPT_LAUNCHES` are kept."""
+        ``execute_s``: its kernels' run time; ``recording_s``: what it spent
+        recording its kernels' replay, to which a new spp's compilation adds
+        where ``spp_compiles``), the first if the cost holds none; only the
+        last :data:`KEPT_LAUNCHES` are kept."""
+        first = not self.launches
         if not self.spp_compiles:
             seconds -= compile_s
         elif recording_s is not None:
@@ -602,8 +603,7 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
     # the spp the sampler took (a square for some); a recording call traces the
     # kernels, which run, or compile, when read back after it
     cost.add(passes.count - count, seconds, recordings() > recorded, spent.compile,
-             spent.execute, first=not cost.launches,
-             recording_s=recording_seconds() - recording)
+             spent.execute, recording_s=recording_seconds() - recording)
     return seconds
 
 

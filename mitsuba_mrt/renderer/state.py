@@ -5,11 +5,11 @@ made: the trace's recorded kernels and the Mitsuba objects held for them,
 a filter or integrator made once per variant, the tables of the pixel
 filters, the OIDN device and filters, interpolation weights, and what the
 last renders took (OIDN's calls, ``auto``'s first round under a time
-limit, the passes' launches, the grid probe's recording).  None of them changes a result, except that
-``auto`` plans a time limit from those times.  :func:`clear_caches` drops
-them all, to free what they hold or to time a first call again;
-docs/ARCHITECTURE.md (Process-wide state) lists each, with the state that
-is not a cache and stays.
+limit, the passes' launches, the grid probe's recording).  None of them
+changes a result, except that ``auto`` plans a time limit from those
+times.  :func:`clear_caches` drops them all, to free what they hold or to
+time a first call again; docs/ARCHITECTURE.md (Process-wide state) lists
+each, with the state that is not a cache and stays.
 """
 
 from __future__ import annotations

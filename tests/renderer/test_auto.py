@@ -5,6 +5,7 @@ import math
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import mitsuba as mi
 import numpy as np
@@ -377,21 +378,9 @@ def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_laun
     # a replayed probe's does not: the passes' first launch adds what recording took more
     assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
     assert auto._passes_recording_s(("other",) + key[1:], probe(False, 0.004)) == 0.0
-    auto._kept_cost(key, _independent_tracer()).add(1, 0.02, recorded=True)
+    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"))
+    auto._kept_cost(key, tracer).add(1, 0.02, recorded=True)
     assert auto._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
-
-
-def _independent_tracer():
-    """A stand-in with what :func:`auto._kept_cost` reads: an ``independent`` sampler."""
-    sampler = mi.load_dict({"type": "independent"})
-
-    class Sensor:
-        def sampler(self):
-            return sampler
-
-    class Tracer:
-        sensor = Sensor()
-    return Tracer()
 
 
 def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
@@ -593,7 +582,6 @@ def timed_tracer(monkeypatch):
     """(Tracer class, its launches' spp): on a fake clock of the passes' module,
     a launch takes 1 s and 1 s a sample per pixel, of an independent sampler."""
     from dataclasses import dataclass
-    from types import SimpleNamespace
 
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.types import SparseTrace
@@ -700,7 +688,8 @@ def test_a_first_launch_s_recording_is_a_new_spp_s_cost_only_until_another_recor
 
     cost = progressive.LaunchCost(spp_compiles=False)
     # a process's first launch recorded, and paid for first uses too; the next replayed
-    cost.add(1, 0.05, recorded=True, first=True)
+    cost.add(1, 0.05, recorded=True)  # (the cost's first)
+    assert cost.launches[0].first
     cost.add(1, 0.02)
     assert cost.record_s == pytest.approx(0.05 - 0.02)  # all there is to go by
     cost.add(2, 0.03, recorded=True)  # a new spp's recording: less than the line says
@@ -741,8 +730,6 @@ def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
 
 def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_has(
         timed_tracer):
-    from types import SimpleNamespace
-
     from mitsuba_mrt.renderer import progressive
 
     Tracer, launched, clock = timed_tracer
