@@ -1,9 +1,13 @@
 """Root pytest hook: choose and activate a Mitsuba variant before collection.
 
 Doctests of the Mitsuba-facing modules need a variant to import, so the
-whole session runs on the variant that ``auto`` picks (LLVM if usable).
+whole session runs on one variant: the one named by the environment variable
+``MITSUBA_MRT_TEST_VARIANT`` (e.g. ``cuda_ad_rgb`` on a GPU machine), else
+the one ``auto`` picks (LLVM if usable).
 """
+
+import os
 
 import mitsuba_mrt
 
-ACTIVE_VARIANT = mitsuba_mrt.activate("auto")
+ACTIVE_VARIANT = mitsuba_mrt.activate(os.environ.get("MITSUBA_MRT_TEST_VARIANT", "auto"))

@@ -34,7 +34,7 @@ CHILD = """
 import json, sys, time
 import mitsuba_mrt
 path, mode, defines = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
-mitsuba_mrt.activate("auto")
+mitsuba_mrt.activate(sys.argv[4])
 scene = mitsuba_mrt.load_scene(path, **defines)
 if mode == "full":
     image, seconds = mitsuba_mrt.render_reference(scene)
@@ -48,7 +48,7 @@ else:
 """
 
 
-def _child(scene: str, mode: str, defines: dict, cold: bool) -> dict:
+def _child(scene: str, mode: str, defines: dict, cold: bool, variant: str) -> dict:
     env = dict(os.environ)
     # as a user's Python: the package's modules compiled once, their bytecode
     # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
@@ -56,17 +56,18 @@ def _child(scene: str, mode: str, defines: dict, cold: bool) -> dict:
     with tempfile.TemporaryDirectory() as home:
         if cold:
             env["HOME"] = home
-        out = subprocess.run([sys.executable, "-c", CHILD, scene, mode, json.dumps(defines)],
-                             env=env, capture_output=True, text=True, check=True)
+        argv = [sys.executable, "-c", CHILD, scene, mode, json.dumps(defines), variant]
+        out = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def measure(scene: str, modes: list, defines: dict, rounds: int, cold: bool) -> list[dict]:
+def measure(scene: str, modes: list, defines: dict, rounds: int, cold: bool,
+            variant: str = "auto") -> list[dict]:
     """One row per method (``full`` first): medians over ``rounds`` fresh processes."""
     runs = {mode: [] for mode in ["full", *modes]}
     for _ in range(rounds):
         for mode in runs:
-            runs[mode].append(_child(scene, mode, defines, cold))
+            runs[mode].append(_child(scene, mode, defines, cold, variant))
     full = statistics.median(r["total"] for r in runs["full"])
     rows = []
     for mode, rs in runs.items():
@@ -115,6 +116,7 @@ def main():
                         metavar="NAME=VALUE")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--cold-cache", action="store_true")
+    parser.add_argument("--variant", default="auto", help="Mitsuba variant (default auto)")
     parser.add_argument("--out", help="also write NAME.csv and NAME.png here (--name)")
     parser.add_argument("--name", default="fresh_process")
     args = parser.parse_args()
@@ -127,7 +129,8 @@ def main():
           f"{'rest s':>7s} {'rest Mpx/s':>10s} {'compiled':>8s} {'from disk':>9s}")
     rows = []
     for scene in args.scenes:
-        for r in measure(scene, args.modes, defines, args.rounds, args.cold_cache):
+        for r in measure(scene, args.modes, defines, args.rounds, args.cold_cache,
+                         args.variant):
             rows.append(r)
             line = (f"{r['scene'][:16]:16s} {r['mode']:8s} {r['render_s']:9.3f} "
                     f"{r['x_full']:7.3f} {r['trace_s']:8.3f}")
