@@ -82,8 +82,8 @@ BAD = [
     # an empty film: Dr.Jit's "see above" error, unless refused when loading
     (["render", SCENES / "paper_fraction.xml", "-D", "res=0"], "the film is 0 x 0 pixels"),
     # more memory than there is: refused before any work, with an estimate
-    (["render", SCENES / "paper_fraction.xml", "-D", "res=20000"],
-     "20000 x 20000 render needs about 100.0 GB of memory (250 bytes per pixel)"),
+    (["render", SCENES / "paper_fraction.xml", "-D", "res=100000"],
+     "100000 x 100000 render needs about 2.5 TB of memory (250 bytes per pixel)"),
     (["bench", "rival", "--quick", "--repeats", "0"], "--repeats must be an integer >= 1, got 0"),
     (["bench", "rival", "--quick", "--repeats", "-2"], "--repeats must be an integer >= 1, got -2"),
 ]

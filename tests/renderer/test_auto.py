@@ -345,6 +345,9 @@ def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scen
     # without the preview (which a limit this small gets) the first pass is denoised
     monkeypatch.setattr(auto, "_preview_due", lambda *args: False)
     release()  # OIDN's cost unknown: the last call is expected to take its prior
+    # no launch measured before: the first is the least, 1 spp (where earlier
+    # renders replayed a larger launch, it may cost less than recording 1 spp)
+    monkeypatch.setattr(auto, "_launch_costs", {})
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
     assert plan.reason == "denoised passes: the time limit" and result.spp == 1

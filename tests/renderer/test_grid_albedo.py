@@ -70,9 +70,15 @@ def test_a_few_samples_give_the_albedo_where_they_agree(variant, monkeypatch):
     scene = _scene()
     assert albedo_per_shape(scene)
     every, few = _traced(scene, monkeypatch, 0), _traced(scene, monkeypatch, 4)
-    # the radiance is the same samples', untouched
+    # the radiance is the same samples', untouched; CUDA compiles the two
+    # kernels' arithmetic apart (fused multiply-adds), so there to 1e-6
+    exact = not mi.variant().startswith("cuda")
     for name in ("radiance", "variance", "alpha", "shape_index", "normal"):
-        np.testing.assert_array_equal(getattr(few, name), getattr(every, name))
+        if exact or name == "shape_index":
+            np.testing.assert_array_equal(getattr(few, name), getattr(every, name))
+        else:
+            np.testing.assert_allclose(getattr(few, name), getattr(every, name),
+                                       rtol=1e-6, atol=1e-6)
     differs = np.abs(few.albedo - every.albedo).max(axis=1) > 1e-6
     near = _near_another_shape(every.shape_index)
     # only pixels across an edge were traced again, from samples of their own
