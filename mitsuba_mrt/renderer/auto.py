@@ -402,8 +402,11 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
     launches = _launch_costs.get(key)
-    if first_s is None and launches is not None and launches.replayed:
-        # earlier passes measured a pass (a probe can record its kernels anew)
+    if first_s is None and launches is not None and launches.launches and (
+            launches.replayed or launches.spp_compiles):
+        # earlier passes measured a pass (a probe can record its kernels
+        # anew); a sampler that bakes its spp launches only the spp launched
+        # before, not the probe's one
         first_s = time.perf_counter() - started + launches(launches.cheapest())
     if first_s is not None:
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
