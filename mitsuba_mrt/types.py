@@ -362,6 +362,8 @@ class SeedStream(enum.IntEnum):
     #: ``auto``'s check of an MRT image (:mod:`mitsuba_mrt.renderer.held_out`)
     CHECK = 7
     LADDER = 16
+    #: ``auto``'s preview: its grid's k-th launch after the first (``PREVIEW + k``)
+    PREVIEW = 4096
 
 
 class Tracer(Protocol):

@@ -22,8 +22,9 @@
 3. Under a time limit too short for one pass and OIDN on the whole image
    (judged from the first round of an earlier time-limited render of the
    scene in this process, else from the preview's own grid, traced first):
-   a *preview*, mode ``fast`` at one sample per grid pixel, its grid
-   denoised (:data:`PREVIEW`).
+   a *preview*, mode ``fast``, its grid denoised (:data:`PREVIEW`): one
+   sample per grid pixel, and more where the limit leaves time
+   (:mod:`.preview`).
 4. Otherwise the image in denoised passes (:mod:`.progressive`): each pass
    is part of the image, and the passes measure how good the denoised image
    gets, so planning costs little.  Under a time limit they fill it;
@@ -56,6 +57,7 @@ from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
 from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
+from .preview import preview_grid
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings
 from .scene_query import (environment_map, lit_diffuse_by_points, sampler_bakes_spp,
@@ -90,7 +92,8 @@ DEFAULT_SPP_SHARE = 0.5
 PROBE_SIDE = 16
 #: The plan where one pass and OIDN on the whole image would overrun a time
 #: limit: the MRT's cheapest image, a tenth of the pixels' samples (its
-#: grid, one sample each) denoised and reconstructed.
+#: grid, one sample each, more where the limit leaves time) denoised and
+#: reconstructed.
 PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
 PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
 #: How far one pass and OIDN may end past a time limit before the preview is
@@ -280,7 +283,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
                                                   notes, probed, id_pass)
         if outcome is not None:
-            return outcome
+            return _filled_preview(outcome, pattern, tracer, params, started)
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, id_pass)
     recorded = recordings()
@@ -422,6 +425,21 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     # the passes' textured pixels, then the same question with their time spent
     surfaces = _surfaces(scene, tracer, width, height, id_pass)
     return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
+
+
+def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params: MRTParams,
+                    started: float) -> AutoOutcome:
+    """``outcome``, the preview, its grid pooled from as many 1-spp launches
+    as end before the limit (its :data:`TIME_MARGIN`) less what the stages
+    after the grid are expected to take (:data:`FINISH_PER_PIXEL`, and OIDN's
+    expected call on the grid on top: a fresh process's first call costs
+    more): :func:`.preview.preview_grid`."""
+    after = (FINISH_PER_PIXEL * pattern.width * pattern.height
+             + expected_seconds(pattern.count, preset(params.denoise_quality)))
+    grid = preview_grid(outcome.grid, pattern, tracer,
+                        started + TIME_MARGIN * params.time_limit - after)
+    outcome.plan.choice = replace(outcome.plan.choice, spp=grid.spp)
+    return replace(outcome, grid=grid)
 
 
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:

@@ -1,15 +1,61 @@
-"""auto's preview under a time limit."""
+"""auto's preview: its grid pooled from 1-spp launches while the limit allows."""
 
 import time
+from dataclasses import dataclass, field
 
 import mitsuba as mi
+import numpy as np
 
 from helpers import ball_scene_xml
 from mitsuba_mrt import MRTParams
 from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer import auto
 from mitsuba_mrt.renderer.api import GridTracer
+from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP, pooled, preview_grid
 from mitsuba_mrt.renderer.progressive import LaunchCost
+from mitsuba_mrt.types import SeedStream, SparseTrace
+
+
+def _trace(n: int, value: float, stream: int = 0) -> SparseTrace:
+    return SparseTrace(radiance=np.full((n, 3), value), albedo=np.full((n, 3), 0.5),
+                       shape_index=np.arange(n), visible_lights=np.zeros(n, np.uint32),
+                       num_lights=0, spp=1, seconds=0.001, variance=np.zeros((n, 3)),
+                       alpha=np.ones(n), normal=np.full((n, 3), float(stream)))
+
+
+@dataclass
+class _Tracer:
+    """Traces every pixel at its stream's number, and remembers each call."""
+
+    spp: int
+    calls: list = field(default_factory=list)
+
+    def __call__(self, pixel_xy, *, stream=SeedStream.EDGES, replay=False, **kwargs):
+        self.calls.append((int(stream), self.spp, replay))
+        return _trace(len(pixel_xy), float(stream), int(stream))
+
+
+def test_a_preview_pools_1_spp_launches_of_seeds_of_its_own_while_the_limit_allows():
+    pattern = grid_pattern(40, 40, 0.1)
+    first = _trace(pattern.count, 0.0)
+    tracer = _Tracer(spp=64)
+    grid = preview_grid(first, pattern, tracer, until=time.perf_counter() + 60.0)
+    streams = [SeedStream.PREVIEW + k for k in range(1, PREVIEW_MAX_SPP)]
+    assert tracer.calls == [(s, 1, True) for s in streams]
+    assert grid.spp == PREVIEW_MAX_SPP
+    np.testing.assert_allclose(grid.radiance, np.mean([0.0, *streams]))
+    assert (grid.variance > 0).all() and (grid.normal == 0.0).all()  # the first's centres
+    # no time left: the first launch alone, traced here where not given
+    tracer = _Tracer(spp=64)
+    alone = preview_grid(None, pattern, tracer, until=time.perf_counter() - 1.0)
+    assert tracer.calls == [(SeedStream.GRID, 1, True)] and alone.spp == 1
+
+
+def test_pooling_one_trace_keeps_it_and_equal_samples_have_no_variance():
+    one = _trace(5, 0.25)
+    assert pooled([one]) is one
+    both = pooled([one, one])
+    assert both.spp == 2 and (both.variance == 0.0).all() and both.seconds == 0.002
 
 
 def test_a_sampler_that_bakes_its_spp_is_judged_by_the_spp_it_has_launched(variant,
