@@ -50,7 +50,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
-from ..recon.denoise import expected_seconds, oidn_available, preset
+from ..recon.denoise import denoise_seconds, expected_seconds, oidn_available, preset
 from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern, every_pixel
 from ..runtime.jit import kernel_seconds
@@ -431,11 +431,13 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
                     started: float) -> AutoOutcome:
     """``outcome``, the preview, its grid pooled from as many 1-spp launches
     as end before the limit (its :data:`TIME_MARGIN`) less what the stages
-    after the grid are expected to take (:data:`FINISH_PER_PIXEL`, and OIDN's
-    expected call on the grid on top: a fresh process's first call costs
-    more): :func:`.preview.preview_grid`."""
-    after = (FINISH_PER_PIXEL * pattern.width * pattern.height
-             + expected_seconds(pattern.count, preset(params.denoise_quality)))
+    after the grid are expected to take (:data:`FINISH_PER_PIXEL`; before
+    OIDN's first call at the preview's quality, that call's expected time on
+    top, which holds its set-up): :func:`.preview.preview_grid`."""
+    quality = preset(params.denoise_quality)
+    after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
+        expected_seconds(pattern.count, quality)
+        if denoise_seconds(pattern.count, quality) is None else 0.0)
     grid = preview_grid(outcome.grid, pattern, tracer,
                         started + TIME_MARGIN * params.time_limit - after)
     outcome.plan.choice = replace(outcome.plan.choice, spp=grid.spp)
