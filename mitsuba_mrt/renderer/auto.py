@@ -59,7 +59,7 @@ from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
 from .preview import preview_grid
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
-from .replay import recordings
+from .replay import recordings, token
 from .scene_query import (environment_map, lit_diffuse_by_points, sampler_bakes_spp,
                           textured_diffuse_shapes, transmits)
 from .trace import trace_shapes
@@ -272,7 +272,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             return outcome
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
-    key = (id(scene), id(tracer.sensor), id(tracer.integrator), width * height)
+    key = (token((scene, tracer.sensor, tracer.integrator)), width * height)
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:

@@ -186,6 +186,14 @@ class Replay:
                 _recording_seconds[0] += time.perf_counter() - begin
 
 
+def token(objects: tuple) -> int:
+    """The token of these Mitsuba objects (a scene first), for tables keyed
+    by the objects a render traces: unlike their ``id``, which a later
+    scene's objects may be given once these are freed, it is never given to
+    other objects."""
+    return _token(objects)
+
+
 def _token(objects: tuple) -> int:
     """The token of these Mitsuba objects: the same while they live, never
     given to others."""

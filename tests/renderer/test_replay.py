@@ -213,6 +213,27 @@ def test_a_dropped_scene_is_let_go_and_a_held_one_kept():
     assert all(o is other for o in held() if id(o) == dropped)  # (other may reuse its id)
 
 
+def test_a_token_stays_with_its_objects_and_is_never_given_again():
+    # auto keys what renders measured by it: a later scene may get a freed one's ids
+    import gc
+
+    from mitsuba_mrt.renderer.replay import token
+
+    scene = mi.load_string(PATH_SCENE)
+    objects = (scene, scene.sensors()[0], scene.integrator())
+    first = token(objects)
+    assert token(objects) == first
+    del scene, objects
+    gc.collect()
+    tokens = set()
+    for _ in range(3):  # each new scene a new token, whatever ids it is given
+        other = mi.load_string(PATH_SCENE)
+        tokens.add(token((other, other.sensors()[0], other.integrator())))
+        del other
+        gc.collect()
+    assert len(tokens) == 3 and first not in tokens
+
+
 @pytest.mark.parametrize("mode", ["fast", "refine", "idpass", "paper"])
 def test_another_spp_compiles_no_kernel(mode):
     # spp is a kernel input, not a literal: a second render at another spp
