@@ -250,6 +250,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     hears of every round of passes.
     """
     spp, limit = tracer.spp, params.time_limit
+    recorded_before = recordings()
     width, height = pattern.width, pattern.height
     denoise = oidn_available()
     notes = [] if denoise else ["Intel Open Image Denoise is not installed (pip install "
@@ -283,7 +284,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
                                                   notes, probed, id_pass)
         if outcome is not None:
-            return _filled_preview(outcome, pattern, tracer, params, started)
+            return _filled_preview(outcome, pattern, tracer, params, started,
+                                   recordings() > recorded_before)
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, id_pass)
     recorded = recordings()
@@ -405,17 +407,22 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
     launches = _launch_costs.get(key)
-    if first_s is None and launches is not None and launches.launches and (
-            launches.replayed or launches.spp_compiles):
-        # earlier passes measured a pass (a probe can record its kernels
-        # anew); a sampler that bakes its spp launches only the spp launched
-        # before, not the probe's one
+    if first_s is None and launches is not None and launches.replayed:
+        # earlier passes measured a pass (a probe can record its kernels anew)
         first_s = time.perf_counter() - started + launches(launches.cheapest())
     if first_s is not None:
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         return (AutoOutcome(preview) if due else None), None, False
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
-    grid, pass_s = probed.grid, probed.pass_s + _passes_recording_s(key, probed)
+    grid, pass_s = probed.grid, probed.pass_s
+    if launches is not None and launches.spp_compiles and launches.launches:
+        # a sampler that bakes its spp launches only spp launched before: the
+        # probe's sample scaled to the least of them (which counts the kernels'
+        # fixed part spp times), or the launches' line where it says less (a
+        # recorded launch may hold a compilation it could not tell apart)
+        spp = launches.cheapest()
+        pass_s = min(probed.host + spp * (probed.pass_s - probed.host), launches(spp))
+    pass_s += _passes_recording_s(key, probed)
 
     def due() -> bool:
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
@@ -428,18 +435,20 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
 
 
 def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params: MRTParams,
-                    started: float) -> AutoOutcome:
+                    started: float, recorded: bool) -> AutoOutcome:
     """``outcome``, the preview, its grid pooled from as many 1-spp launches
     as end before the limit (its :data:`TIME_MARGIN`) less what the stages
     after the grid are expected to take (:data:`FINISH_PER_PIXEL`; before
     OIDN's first call at the preview's quality, that call's expected time on
-    top, which holds its set-up): :func:`.preview.preview_grid`."""
+    top, which holds its set-up): :func:`.preview.preview_grid`.  None more
+    where the render has ``recorded`` kernels: Dr.Jit records a layout's
+    first two calls, so the next launch may record too."""
     quality = preset(params.denoise_quality)
     after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
         expected_seconds(pattern.count, quality)
         if denoise_seconds(pattern.count, quality) is None else 0.0)
-    grid = preview_grid(outcome.grid, pattern, tracer,
-                        started + TIME_MARGIN * params.time_limit - after)
+    until = started if recorded else started + TIME_MARGIN * params.time_limit - after
+    grid = preview_grid(outcome.grid, pattern, tracer, until)
     outcome.plan.choice = replace(outcome.plan.choice, spp=grid.spp)
     return replace(outcome, grid=grid)
 

@@ -61,16 +61,20 @@ def test_pooling_one_trace_keeps_it_and_equal_samples_have_no_variance():
 def test_a_sampler_that_bakes_its_spp_is_judged_by_the_spp_it_has_launched(variant,
                                                                            monkeypatch):
     # its passes launch only the spp launched before, however cheap the probe's
-    # one sample is: a launch of 16 spp that took 50 s leaves no time for a pass
+    # one sample is: the probe's pass of 0.2 s is 3.2 s at the 16 spp launched
     scene = mi.load_string(ball_scene_xml(64, spp=16, sampler="stratified"))
     tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), 16, 0)
     pattern, key = grid_pattern(64, 64, 0.1), ("a test's key",)
-    params = MRTParams(time_limit=5.0)
+    probe = auto._grid_probe(pattern, tracer)
+    monkeypatch.setattr(auto, "_grid_probe", lambda *args: probe._replace(
+        pass_s=0.2, host=0.0, recorded=False))
+    monkeypatch.setitem(auto._probe_recording_s, key, 0.0)
+    params = MRTParams(time_limit=1.0)
     for bakes in (True, False):
         cost = LaunchCost(spp_compiles=bakes)
-        cost.add(16, 50.0, recorded=True)
+        cost.add(16, 50.0, recorded=True)  # (its time holds its compilation)
         monkeypatch.setitem(auto._launch_costs, key, cost)
         outcome, _, _ = auto._preview_first(scene, pattern, tracer, params,
                                             time.perf_counter(), key, [])
-        # without baking, the recorded launch tells nothing: the probe's pass fits
+        # without baking, a pass is the probe's one sample: it fits
         assert (outcome is not None and outcome.plan.choice.mode == "fast") == bakes
