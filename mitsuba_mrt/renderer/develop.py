@@ -192,7 +192,7 @@ def _read_sums(sums, radiance: bool = True) -> _Developed:
     # a sample's NaN or Inf: reported by the caller's check, as a full render's
     rgb[:, np.asarray(sums[12]) > 0.0] = np.nan
     return _Developed(pixels(rgb), np.asarray(sums[3], dtype=np.float64) * per_weight,
-                      pixels(_variance(second, rgb)), albedo, normal, odd)
+                      pixels(sample_variance(second, rgb)), albedo, normal, odd)
 
 
 def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
@@ -459,7 +459,7 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
     # (zeros of their own, not copies: untraced fields cost no memory until written)
     rgb, alpha, second = (take(3), take(1).reshape(n), take(3)) if radiance else (
         np.zeros((n, 3)), np.zeros(n), None)
-    variance = np.zeros((n, 3)) if second is None else _variance(second, rgb)
+    variance = np.zeros((n, 3)) if second is None else sample_variance(second, rgb)
     guide = (take(3), take(3) if normals else np.zeros((n, 3))) if albedo else (
         np.zeros((n, 3)), np.zeros((n, 3)))
     odd = take(3) if halves else None
@@ -467,7 +467,7 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
     return _Developed(rgb, alpha, variance, *guide, odd, varies)
 
 
-def _variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
+def sample_variance(second: np.ndarray, mean: np.ndarray) -> np.ndarray:
     """A single sample's variance from its mean square and mean (float64)."""
     variance = second - mean ** 2
     # below this it is the float32 sums' rounding (a single sample's is all rounding)

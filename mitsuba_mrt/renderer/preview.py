@@ -19,7 +19,7 @@ import numpy as np
 
 from ..recon.sampling import SamplePattern
 from ..types import SeedStream, SparseTrace
-from .develop import VARIANCE_FLOOR
+from .develop import sample_variance
 from .replay import recordings
 
 #: The most 1-spp launches a preview's grid pools.
@@ -56,8 +56,7 @@ def pooled(traces: list[SparseTrace]) -> SparseTrace:
     radiance = mean([t.radiance for t in traces])
     second = mean([np.asarray(t.variance if t.variance is not None else 0.0, dtype=np.float64)
                    + np.asarray(t.radiance, dtype=np.float64) ** 2 for t in traces])
-    variance = second - radiance ** 2
-    variance = np.where(variance > VARIANCE_FLOOR * second, variance, 0.0)
+    variance = sample_variance(second, radiance)
     alpha = None if first.alpha is None else mean([t.alpha for t in traces])
     return replace(first, radiance=radiance, albedo=mean([t.albedo for t in traces]),
                    alpha=alpha, variance=variance, spp=int(weights.sum()),

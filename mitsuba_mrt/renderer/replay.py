@@ -166,7 +166,7 @@ class Replay:
         (``args[-1]``), made now if there is none."""
         if not (record and _replaying[-1]):
             return self.plain(*args)
-        key = (_token(objects), args[-1])
+        key = (token(objects), args[-1])
         if key in self._failed:
             return self.plain(*args)
         frozen = self.frozen.get(key)
@@ -187,27 +187,21 @@ class Replay:
 
 
 def token(objects: tuple) -> int:
-    """The token of these Mitsuba objects (a scene first), for tables keyed
-    by the objects a render traces: unlike their ``id``, which a later
-    scene's objects may be given once these are freed, it is never given to
-    other objects."""
-    return _token(objects)
-
-
-def _token(objects: tuple) -> int:
-    """The token of these Mitsuba objects: the same while they live, never
-    given to others."""
+    """The token of these Mitsuba objects (a scene first): the same while
+    they live, never given to others (unlike their ``id``, which a later
+    scene's objects may be given once these are freed); the key of what is
+    kept per traced objects, here and in ``auto``."""
     _release_dropped()
     ids = tuple(id(o) for o in objects)
     held = _held.get(ids)
     if held is not None:  # held, so these very objects: no other can have their ids
         _held.move_to_end(ids)
         return held[1]
-    token = next(_tokens)
-    _held[ids] = (objects, token)
+    new = next(_tokens)
+    _held[ids] = (objects, new)
     if len(_held) > KEPT_OBJECTS:
         _held.popitem(last=False)
-    return token
+    return new
 
 
 def _release_dropped() -> None:
