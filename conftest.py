@@ -8,6 +8,13 @@ the one ``auto`` picks (LLVM if usable).
 
 import os
 
+import pytest
+
 import mitsuba_mrt
 
-ACTIVE_VARIANT = mitsuba_mrt.activate(os.environ.get("MITSUBA_MRT_TEST_VARIANT", "auto"))
+
+def pytest_configure(config):
+    try:
+        mitsuba_mrt.activate(os.environ.get("MITSUBA_MRT_TEST_VARIANT", "auto"))
+    except mitsuba_mrt.MRTError as exc:
+        raise pytest.UsageError(f"MITSUBA_MRT_TEST_VARIANT: {exc}") from None

@@ -29,6 +29,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from mitsuba_mrt.renderer.variants import VARIANT_CHOICES
+
 #: The child's program: one render, its figures as one JSON line.
 CHILD = """
 import json, sys, time
@@ -57,7 +59,11 @@ def _child(scene: str, mode: str, defines: dict, cold: bool, variant: str) -> di
         if cold:
             env["HOME"] = home
         argv = [sys.executable, "-c", CHILD, scene, mode, json.dumps(defines), variant]
-        out = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
+        out = subprocess.run(argv, env=env, capture_output=True, text=True)
+    if out.returncode != 0:  # (the child's last line: its error)
+        lines = out.stderr.strip().splitlines() or [f"exit status {out.returncode}"]
+        print(f"error: {mode} render of {scene} failed: {lines[-1]}", file=sys.stderr)
+        sys.exit(2)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -116,7 +122,8 @@ def main():
                         metavar="NAME=VALUE")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--cold-cache", action="store_true")
-    parser.add_argument("--variant", default="auto", help="Mitsuba variant (default auto)")
+    parser.add_argument("--variant", default="auto", choices=VARIANT_CHOICES,
+                        help="Mitsuba variant (default auto)")
     parser.add_argument("--out", help="also write NAME.csv and NAME.png here (--name)")
     parser.add_argument("--name", default="fresh_process")
     args = parser.parse_args()
