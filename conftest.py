@@ -13,8 +13,23 @@ import pytest
 import mitsuba_mrt
 
 
+_variant: list[str] = []  # the session's variant, set by pytest_configure
+
+
 def pytest_configure(config):
     try:
-        mitsuba_mrt.activate(os.environ.get("MITSUBA_MRT_TEST_VARIANT", "auto"))
+        _variant[:] = [mitsuba_mrt.activate(os.environ.get("MITSUBA_MRT_TEST_VARIANT", "auto"))]
     except mitsuba_mrt.MRTError as exc:
         raise pytest.UsageError(f"MITSUBA_MRT_TEST_VARIANT: {exc}") from None
+
+
+@pytest.fixture(autouse=True)
+def _keep_the_session_variant():
+    """Give the next test the session's variant back: a test that runs the
+    CLI or a job in-process activates their own choice (``auto``), and the
+    tests after it would run on that one."""
+    yield
+    import mitsuba as mi
+
+    if _variant and mi.variant() != _variant[0]:
+        mitsuba_mrt.activate(_variant[0])
