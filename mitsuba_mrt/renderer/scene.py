@@ -24,13 +24,19 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
     Raises MRTError with a one-line message for a missing or malformed file,
     and for a film that is empty or needs more memory than is available
     (:func:`check_film`); warns (:class:`MRTWarning`) about emitters of
-    negative intensity (:func:`warn_negative_emitters`).
+    negative intensity (:func:`warn_negative_emitters`).  In the JIT variants
+    the scene loads on one thread, so that its kernels are the same in every
+    process (and found in Dr.Jit's disk cache).
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise MRTError(f"scene file not found: {path}")
     try:
-        scene = mi.load_file(path, **{k: str(v) for k, v in defines.items()})
+        # one thread in the JIT variants: loaded on several, a scene's kernels
+        # come out in one of several variable orders from process to process,
+        # and a fresh process may miss Dr.Jit's disk cache (docs/BENCHMARKS.md)
+        scene = mi.load_file(path, parallel=mi.variant().startswith("scalar"),
+                             **{k: str(v) for k, v in defines.items()})
     except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain Exceptions
         error = exc
     else:

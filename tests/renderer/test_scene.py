@@ -59,3 +59,15 @@ def test_a_launch_planned_for_some_spp_traces_no_more(variant, sampler, expected
 
     taken = [sample_count_at_most(mi.load_dict({"type": sampler}), spp) for spp in (1, 2, 3, 5, 8)]
     assert taken == expected
+
+
+def test_a_jit_variant_loads_the_scene_on_one_thread(variant, tmp_path, monkeypatch):
+    # loaded on several threads, a scene's kernels came out in one of two
+    # variable orders from process to process (CUDA), missing the disk cache
+    path = tmp_path / "small.xml"
+    path.write_text(small_scene_xml(res=8))
+    calls = []
+    load_file = mi.load_file
+    monkeypatch.setattr(mi, "load_file", lambda *a, **k: calls.append(k) or load_file(*a, **k))
+    scene_module.load_scene(path)
+    assert calls[0]["parallel"] is variant.startswith("scalar")
