@@ -3,7 +3,8 @@
 Every pass traces each pixel once more (a box pixel filter; the first
 :data:`GUIDE_PASSES` also the albedo and shading normal of the same
 samples, OIDN's guides), and the passes go on in rounds that double their
-number until the denoised image's estimated error meets the target, the
+number (or, near the target, add what the estimates say it lacks:
+:func:`to_target`) until the denoised image's estimated error meets it, the
 next round would overrun the time left (then smaller launches fill what is
 left of it), or the spp reach the cap; then the mean of the passes goes
 through OIDN once (with ``quality="auto"`` at the preset
@@ -56,6 +57,11 @@ DEFAULT_FIRST_SHARE = 1 / 8
 #: until two rounds have measured it (the slow end of what OIDN's curves
 #: show between 4 and 8 spp); and the range a measured rate is held in.
 DEFAULT_RATE, RATE_RANGE = 0.2, (0.2, 1.0)
+#: A round after the first aims this far below the target (its estimate is
+#: noisy): where the last round nearly met it, the next adds what
+#: :func:`needed_spp` says it lacks, rather than doubling the passes (a
+#: sampler that compiles kernels per spp keeps doubling: a new spp compiles).
+TARGET_MARGIN = 0.95
 #: Passes that also trace the albedo and normals, OIDN's guides (they cost
 #: about half a sample more each, and the guides converge long before the
 #: colour), or the whole first round where it has more.
@@ -288,6 +294,24 @@ def needed_spp(history: list, target: float) -> float:
     if e1 <= target:
         return float(s1)
     return s1 * (e1 / target) ** (1.0 / rate_of(history))
+
+
+def to_target(history: list, target: float, count: int, most: int) -> int:
+    """The passes of the next round: as many as :func:`needed_spp` says
+    bring ``count`` passes to :data:`TARGET_MARGIN` times ``target``,
+    rounded up to an even number (both halves grow alike), from
+    :data:`FIRST_ROUND` to ``most`` (the doubling).
+
+    Examples
+    --------
+    >>> to_target([(2, 0.14), (4, 0.1)], 0.07, 8, 8)   # 8 passes predict 0.0714: 2 more
+    2
+    >>> to_target([(4, 0.2)], 0.1, 8, 8)                # far over: the doubling
+    8
+    """
+    needed = needed_spp(history, target * TARGET_MARGIN)
+    size = math.ceil(needed - count) if math.isfinite(needed) else most
+    return int(min(max(size + size % 2, FIRST_ROUND), most))
 
 
 def final_quality(trace_s: float, fast_s: float, rate: float,
@@ -722,6 +746,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                   least=2 if estimates else 1)
             break
         round_size = next_size
+        if exact is None and not bakes and target is not None and progress.history:
+            round_size = to_target(progress.history, target, passes.count, next_size)
     image = passes.mean
     if denoise:
         left = None if deadline is None else deadline - time.perf_counter() - oidn_s

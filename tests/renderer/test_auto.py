@@ -790,3 +790,22 @@ def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
     assert all(halves for _, halves, _ in seen)
     # each later round doubles the passes
     assert [spp for spp, _, _ in seen] == [8 * 2 ** max(k - 1, 0) for k in range(len(seen))]
+
+
+def test_near_the_target_a_round_adds_what_the_estimates_say_it_lacks(timed_tracer, monkeypatch):
+    from mitsuba_mrt.renderer import progressive
+
+    Tracer, launched, clock = timed_tracer
+
+    def estimate(passes, progress, *_):  # a denoised half's error: 0.2 / sqrt(its spp)
+        progress.history.append((passes.half_counts[0], 0.2 * passes.half_counts[0] ** -0.5))
+        progress.predicted = progressive.predict(progress.history, passes.count)
+
+    monkeypatch.setattr(progressive, "_estimate", estimate)
+    _, _, progress = progressive.run_passes(
+        Tracer(), 2, 2, quality="fast", target_error=0.04, deadline=None, max_spp=64,
+        full_spp=64, area=1.0, denoise=False)
+    # rounds double the passes while far from the target (16 predict 0.05); then, the
+    # rate measured (0.5), 0.95 of the target needs 27.7 spp: 12 more, not 16
+    assert launched == [2, 2, 4, 8, 12] and progress.stopped == "met the target"
+    assert progress.spp == 28 and progress.predicted <= 0.04
