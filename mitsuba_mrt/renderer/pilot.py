@@ -17,7 +17,8 @@ would:
 
 A candidate's error is its mean squared difference to a reference it is
 independent of, less that reference's own noise (its variance, known from
-the samples): an estimate of its squared error against the converged image,
+the samples, or from the halves' difference where the sampler stratifies
+them): an estimate of its squared error against the converged image,
 without one.  A full render's error is its noise alone, from the same
 variance.  Errors are relative RMS: the root of that mean over the pixels a
 display shows unclipped (reference below 1), over the reference's mean
@@ -41,6 +42,7 @@ from ..runtime.jit import kernel_seconds
 from ..types import MRTParams, SeedStream, SparseTrace
 from .pipeline import mrt_image
 from .pixel_filter import filter_table
+from .scene_query import sampler_bakes_spp
 
 #: Strips the pilot traces, spread over the image's height.
 STRIP_COUNT = 2
@@ -129,7 +131,8 @@ def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams
     halves, compile_ref = _timed(half, np.tile(xy, (2, 1)), stream=SeedStream.REFERENCE,
                                  aovs=False, replay=True)
     ref_a, ref_b = halves.take(slice(0, n)), halves.take(slice(n, 2 * n))
-    ref = Reference.of(ref_a, ref_b)
+    # every sampler but ``independent`` (those that bake their spp) stratifies
+    ref = Reference.of(ref_a, ref_b, stratified=sampler_bakes_spp(tracer.sensor.sampler()))
     sample_s = max(halves.seconds - compile_ref, 0.0) / (2 * n * half.spp)
     area = effective_area(tracer.sensor.film().rfilter())
     candidates = [Candidate("full", "full", s, seconds=pixels * s * sample_s,
@@ -220,7 +223,11 @@ class Reference:
     """The pilot's reference of the strips, and errors measured against it.
 
     ``a`` and ``b`` are its two independent halves, ``mean`` both together;
-    ``variance`` a single sample's per pixel.
+    ``variance`` a single sample's per pixel; ``noise_b`` and ``noise_mean``
+    the variance of ``b`` and of ``mean`` per pixel: the sample variance
+    over their spp, or, where the sampler stratifies a pixel's samples
+    (their mean varies less than that says), from the halves' own
+    difference (its square is twice a half's variance).
     """
 
     a: np.ndarray
@@ -229,12 +236,20 @@ class Reference:
     spp_a: int
     spp_b: int
     variance: np.ndarray
+    noise_b: np.ndarray
+    noise_mean: np.ndarray
 
     @classmethod
-    def of(cls, a: SparseTrace, b: SparseTrace) -> "Reference":
+    def of(cls, a: SparseTrace, b: SparseTrace, stratified: bool = False) -> "Reference":
+        """The reference of halves ``a`` and ``b`` (of equal spp where ``stratified``)."""
         mean = (a.radiance * a.spp + b.radiance * b.spp) / (a.spp + b.spp)
         variance = 0.5 * (a.variance + b.variance)
-        return cls(a.radiance, b.radiance, mean, a.spp, b.spp, variance)
+        if stratified:
+            half = 0.5 * (a.radiance - b.radiance) ** 2
+            noise_b, noise_mean = half, 0.5 * half
+        else:
+            noise_b, noise_mean = variance / b.spp, variance / (a.spp + b.spp)
+        return cls(a.radiance, b.radiance, mean, a.spp, b.spp, variance, noise_b, noise_mean)
 
     def relative(self, squared: np.ndarray) -> float:
         """The relative RMS error of per-pixel squared errors (n, 3)
@@ -247,8 +262,7 @@ class Reference:
 
     def against_mean(self, image: np.ndarray) -> float:
         """The error of ``image`` (n, 3), independent of the reference, as displayed."""
-        return self.relative((shown(image) - self.mean) ** 2
-                             - self.variance / (self.spp_a + self.spp_b))
+        return self.relative((shown(image) - self.mean) ** 2 - self.noise_mean)
 
 
 def shown(image: np.ndarray) -> np.ndarray:
@@ -313,7 +327,7 @@ def _mrt(scene, pattern: SamplePattern, strips: list, ref: Reference, ref_a: Spa
         image = made.recon.image.reshape(-1, 3)
         served = (made.recon.traced_mask & ~sub.mask).ravel()
         more += int(served.sum())
-        err = (shown(image) - ref.b[start:stop]) ** 2 - ref.variance[start:stop] / ref.spp_b
+        err = (shown(image) - ref.b[start:stop]) ** 2 - ref.noise_b[start:stop]
         if not (denoise and mode == "refine"):
             err[served] = ref.variance[start:stop][served] / grid.spp
         squared[start:stop] = err

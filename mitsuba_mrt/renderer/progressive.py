@@ -19,7 +19,13 @@ which are independent of it; their difference, less the odd mean's own
 noise (from the two means' difference), estimates the squared
 error of the image denoised from ``k / 2`` passes, and the last two rounds
 say how fast it falls (:func:`predict`); a round that ends the passes at
-their cap is not estimated, only predicted.  It is measured on a quarter of the
+their cap is not estimated, only predicted.  A sampler that stratifies a
+pixel's samples (all of Mitsuba's but ``independent``) makes its odd and
+even samples no independent halves (their difference overstates the noise,
+and the estimate said 0): there the whole round is denoised and compared
+with a launch of its own over every other estimated row, as many spp with
+other random numbers, less that launch's noise (half the two's squared
+difference).  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 Under a time limit alone no error is estimated: the passes only fill the
 time, less what the last OIDN call is expected to take
@@ -120,7 +126,12 @@ class Passes:
     ``square``, the sums of each trace's pixel means and of its samples'
     squares, means and variances clipped likewise.  ``guides`` counts the
     samples that traced the guides, ``guide_spp`` how many should.  Counts
-    are samples per pixel.
+    are samples per pixel.  With ``companion`` (a sampler that stratifies a
+    pixel's samples: its odd and even ones are no independent halves) every
+    launch goes into half 0, and half 1 is a launch of its own, with another
+    seed and as many spp, of the pixels of ``crop`` at the positions
+    ``companion`` (every other row: :meth:`add_companion`); the estimates
+    read those alone.
     """
 
     crop: np.ndarray
@@ -136,6 +147,7 @@ class Passes:
     normal: np.ndarray | None = None
     alpha: np.ndarray | None = None
     textured: np.ndarray | None = None
+    companion: np.ndarray | None = None
 
     def add(self, trace, half: int | None, guides: bool) -> None:
         """Add ``trace`` (every pixel, at its spp) to half 0 or 1, or, for
@@ -171,6 +183,17 @@ class Passes:
         if trace.alpha is not None:
             self.alpha += spp * trace.alpha
         self.count += spp
+
+    def add_companion(self, trace) -> None:
+        """Add ``trace`` (the pixels ``crop[companion]``, independent of the
+        passes) to half 1."""
+        self.halves[1][self.companion] += trace.spp * np.minimum(trace.radiance, ESTIMATE_CLIP)
+        self.half_counts[1] += trace.spp
+
+    @property
+    def compared(self):
+        """The positions in ``crop`` where both halves have samples."""
+        return slice(None) if self.companion is None else self.companion
 
     @property
     def mean(self) -> np.ndarray:
@@ -363,12 +386,19 @@ def estimate_rows(height: int, width: int) -> np.ndarray:
 def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
                 half: int | None) -> None:
     """Trace every pixel at ``spp`` (launch number ``launch``: its own seed)
-    into ``half`` of ``passes`` (None: its even and odd samples into each),
-    with the guides while they are wanted."""
+    into ``half`` of ``passes`` (None: its even and odd samples into each,
+    or with :attr:`Passes.companion` all of it into half 0 and a launch of
+    the estimate's pixels into half 1), with the guides while they are wanted."""
     guides = passes.count < passes.guide_spp
+    companion = half is None and passes.companion is not None
     trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
-                                     ids=False, box=True, replay=True, halves=half is None)
-    passes.add(trace, half, guides)
+                                     ids=False, box=True, replay=True,
+                                     halves=half is None and not companion)
+    passes.add(trace, 0 if companion else half, guides)
+    if companion:  # (the guides as the launch had them: the same kernels)
+        passes.add_companion(replace(tracer, spp=spp)(
+            xy[passes.crop[passes.companion]], stream=SeedStream.ESTIMATE + launch, aovs=guides, ids=False,
+            box=True, replay=True))
 
 
 def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full_spp: int,
@@ -379,7 +409,8 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
     without ``denoise``, the passes' mean's error."""
     variance = passes.variance
     if not denoise:
-        mean = (passes.halves[0] + passes.halves[1]) / passes.count
+        mean = (passes.halves[0] if passes.companion is not None
+                else passes.halves[0] + passes.halves[1]) / passes.count
         progress.predicted = relative_error(variance / passes.count, mean)
         progress.full_error = relative_error(variance / (full_spp * area), mean)
         return
@@ -387,7 +418,9 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
     denoised = passes.denoised(passes.half_mean(0), passes.crop, shape, quality)
     squared = ((np.clip(denoised, 0.0, 1.0) - passes.half_mean(1)) ** 2
                - passes.half_noise())
-    progress.history.append((passes.half_counts[0], relative_error(squared, denoised)))
+    both = passes.compared
+    progress.history.append((passes.half_counts[0], relative_error(squared[both],
+                                                                   denoised[both])))
     progress.predicted = predict(progress.history, passes.count)
     progress.full_error = relative_error(variance / (full_spp * area), denoised)
 
@@ -679,6 +712,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not (deadline is not None and target_error is None)
+    # Mitsuba's samplers but ``independent`` (those that bake their spp) place a
+    # pixel's samples in strata: the estimates take an independent launch
+    if estimates and bakes:  # every other row of the estimate's strips
+        passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
     as_rounds = estimates or bakes
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else

@@ -17,6 +17,7 @@ from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
 from mitsuba_mrt.renderer import auto, pilot
 
+from helpers import SCENES
 from helpers import ball_scene_xml as scene_xml
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -786,10 +787,30 @@ def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
     monkeypatch.setattr(GridTracer, "__call__", spy)
     result = mitsuba_mrt.render(scene)
     assert result.mode_used == "full+oidn"
-    assert seen[0] == (8, True, 256 * 256)
-    assert all(halves for _, halves, _ in seen)
-    # each later round doubles the passes
-    assert [spp for spp, _, _ in seen] == [8 * 2 ** max(k - 1, 0) for k in range(len(seen))]
+    rounds = [s for s in seen if s[2] == 256 * 256]
+    spp = [s for s, _, _ in rounds]
+    if sampler == "independent":
+        assert rounds == seen and all(halves for _, halves, _ in seen)
+        # a later round adds at most as many passes as there are
+        assert spp[0] == 8 and all(s <= sum(spp[:k]) for k, s in enumerate(spp) if k)
+    else:
+        from mitsuba_mrt.renderer import progressive
+
+        # a stratifying sampler's odd and even samples are no independent halves:
+        # each launch has a companion over every other row of the estimate's
+        rows = len(progressive.estimate_rows(256, 256)) // 2 * 256
+        assert seen[::2] == rounds and seen[1::2] == [(s, False, rows) for s in spp]
+        assert spp[0] == 8 and spp == sorted(spp)
+
+
+def test_a_stratifying_sampler_s_estimates_see_its_noise(variant):
+    # its odd and even samples, strata of one set, differ by more than two
+    # independent halves: on this scene their difference said 0 error at 9
+    # spp and met any target; a launch of its own is independent of the round's
+    scene = mitsuba_mrt.load_scene(SCENES / "gallery" / "instanced.xml", res=256)
+    result = mitsuba_mrt.render(scene)
+    (spp, error), = result.auto.passes
+    assert spp == result.spp == 9 and 0.02 < error < result.auto.target_error
 
 
 def test_near_the_target_a_round_adds_what_the_estimates_say_it_lacks(timed_tracer, monkeypatch):
@@ -809,3 +830,17 @@ def test_near_the_target_a_round_adds_what_the_estimates_say_it_lacks(timed_trac
     # rate measured (0.5), 0.95 of the target needs 27.7 spp: 12 more, not 16
     assert launched == [2, 2, 4, 8, 12] and progress.stopped == "met the target"
     assert progress.spp == 28 and progress.predicted <= 0.04
+
+
+def test_a_stratified_pilot_reference_s_noise_is_its_halves_difference():
+    from mitsuba_mrt.renderer.pilot import Reference
+
+    # strata make a pixel's mean vary less than its samples' variance over the spp says
+    a = SimpleNamespace(radiance=np.full((2, 3), 0.50), variance=np.full((2, 3), 0.04), spp=4)
+    b = SimpleNamespace(radiance=np.full((2, 3), 0.52), variance=np.full((2, 3), 0.04), spp=4)
+    plain, stratified = Reference.of(a, b), Reference.of(a, b, stratified=True)
+    assert plain.noise_b == pytest.approx(np.full((2, 3), 0.01))
+    assert plain.noise_mean == pytest.approx(np.full((2, 3), 0.005))
+    # the square of the halves' difference is twice a half's variance
+    assert stratified.noise_b == pytest.approx(np.full((2, 3), 0.0002))
+    assert stratified.noise_mean == pytest.approx(np.full((2, 3), 0.0001))
