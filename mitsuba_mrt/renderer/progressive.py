@@ -397,8 +397,8 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     passes.add(trace, 0 if companion else half, guides)
     if companion:  # (the guides as the launch had them: the same kernels)
         passes.add_companion(replace(tracer, spp=spp)(
-            xy[passes.crop[passes.companion]], stream=SeedStream.ESTIMATE + launch, aovs=guides, ids=False,
-            box=True, replay=True))
+            xy[passes.crop[passes.companion]], stream=SeedStream.ESTIMATE + launch,
+            aovs=guides, ids=False, box=True, replay=True))
 
 
 def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full_spp: int,
