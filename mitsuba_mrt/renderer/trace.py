@@ -97,6 +97,10 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
     pixel_xy = np.asarray(pixel_xy, dtype=np.int64)
     n = len(pixel_xy)
+    if n == 0 and is_jit():  # Dr.Jit aborts the process on a launch of no lanes
+        return trace_pixels(scene, sensor, integrator, np.zeros((1, 2), np.int64), spp, seed,
+                            aovs, radiance, box=box, ids=ids, albedo=albedo,
+                            halves=halves).take(slice(0, 0))
     if pad and n and is_jit() and replay_active() and replayable(scene):
         return trace_pixels(scene, sensor, integrator, _padded(pixel_xy), spp, seed, aovs,
                             radiance, replay=True, box=box, ids=ids, albedo=albedo,

@@ -109,6 +109,23 @@ def test_traced_pixels_equal_the_full_render(variant):
     assert paper_error(result.image, reference) < 0.02
 
 
+@pytest.mark.parametrize("kind", [{}, {"radiance": False}, {"box": True, "ids": False,
+                                                               "halves": True}])
+def test_a_trace_of_no_pixels_is_empty(variant, kind):
+    # a launch over no lanes aborts Dr.Jit's whole process, past any ``except``
+    from mitsuba_mrt.renderer.trace import trace_pixels
+
+    scene = mi.load_string(small_scene_xml(8))
+    none = trace_pixels(scene, scene.sensors()[0], scene.integrator(),
+                        np.zeros((0, 2), np.int64), 4, replay=True, **kind)
+    one = trace_pixels(scene, scene.sensors()[0], scene.integrator(),
+                       np.zeros((1, 2), np.int64), 4, **kind)
+    for field in ("radiance", "albedo", "shape_index", "normal", "variance", "odd", "alpha"):
+        full, empty = getattr(one, field), getattr(none, field)
+        assert (empty is None) == (full is None)
+        assert empty is None or empty.shape == (0, *full.shape[1:])
+
+
 def test_ids_come_from_the_trace(variant):
     scene = mi.load_string(small_scene_xml(32))
     result = mitsuba_mrt.render(scene, sample_fraction=0.3, id_rule="exact", mode="paper")
