@@ -131,7 +131,7 @@ def run_pilot(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams
     halves, compile_ref = _timed(half, np.tile(xy, (2, 1)), stream=SeedStream.REFERENCE,
                                  aovs=False, replay=True)
     ref_a, ref_b = halves.take(slice(0, n)), halves.take(slice(n, 2 * n))
-    # every sampler but ``independent`` (those that bake their spp) stratifies
+    # (a sampler that bakes its spp stratifies a pixel's samples)
     ref = Reference.of(ref_a, ref_b, stratified=sampler_bakes_spp(tracer.sensor.sampler()))
     sample_s = max(halves.seconds - compile_ref, 0.0) / (2 * n * half.spp)
     area = effective_area(tracer.sensor.film().rfilter())

@@ -712,9 +712,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not (deadline is not None and target_error is None)
-    # Mitsuba's samplers but ``independent`` (those that bake their spp) place a
-    # pixel's samples in strata: the estimates take an independent launch
-    if estimates and bakes:  # every other row of the estimate's strips
+    # a sampler that bakes its spp stratifies a pixel's samples: the estimates
+    # take a launch of their own, over every other row of the strips
+    if estimates and bakes:
         passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
     as_rounds = estimates or bakes
     # (under a deadline a launch traces no more spp than planned)
@@ -783,7 +783,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                   least=2 if estimates else 1)
             break
         round_size = next_size
-        if exact is None and not bakes and target is not None and progress.history:
+        if not bakes and target is not None and progress.history:
             round_size = to_target(progress.history, target, passes.count, next_size)
     image = passes.mean
     if denoise:

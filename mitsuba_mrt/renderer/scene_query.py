@@ -55,7 +55,9 @@ def sampler_bakes_spp(sampler: mi.Sampler) -> bool:
     """Whether ``sampler``'s arithmetic bakes its sample count into the
     kernels (all of Mitsuba's but ``independent``: ``stratified``,
     ``multijitter``, ``orthogonal``, ``ldsampler``): a trace at an spp not
-    traced before compiles kernels of its own."""
+    traced before compiles kernels of its own.  These are also the samplers
+    that place a pixel's samples in strata, so that its odd and even samples
+    are no independent halves."""
     return not str(sampler).startswith("IndependentSampler")
 
 
