@@ -14,11 +14,13 @@
    each where its id pass has at most :data:`WIDE_EDGE_SHARE` of its pixels
    at an edge between ids;
    :data:`SKY` (mode ``refine``, its grid denoised) under an environment
-   map.  The image is kept where its held-out check (:mod:`.held_out`,
-   :func:`keeps`) finds it near a full render's quality, else the passes
-   render the image after it.  Under a time limit (OIDN installed, at least
-   :data:`HOME_MIN_SPP` spp) the same :data:`HOME` plan, unchecked, where
-   the grid probe says it ends within the limit (:func:`_mrt_within`).
+   map and on smaller images without one where a surface mirrors or
+   transmits light and none is textured.  The image is kept where its
+   held-out check (:mod:`.held_out`, :func:`keeps`) finds it near a full
+   render's quality, else the passes render the image after it.  Under a
+   time limit (OIDN installed, at least :data:`HOME_MIN_SPP` spp) the same
+   :data:`HOME` plan, unchecked, where the grid probe says it ends within
+   the limit (:func:`_mrt_within`).
 3. Under a time limit too short for one pass and OIDN on the whole image
    (judged from the first round of an earlier time-limited render of the
    scene in this process, else from the preview's own grid, traced first):
@@ -60,8 +62,8 @@ from .pilot import effective_area, run_pilot
 from .preview import preview_grid
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings, token
-from .scene_query import (environment_map, lit_diffuse_by_points, sampler_bakes_spp,
-                          textured_diffuse_shapes, transmits)
+from .scene_query import (environment_map, has_mirrors, lit_diffuse_by_points,
+                          sampler_bakes_spp, textured_diffuse_shapes, transmits)
 from .trace import trace_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
@@ -148,6 +150,15 @@ WIDE_EDGE_SHARE = 0.045
 #: is 1.07-1.72x and the passes about 1.0x).
 SKY = Candidate("refine+oidn", "mrt", 0, mode="refine", denoise=True)
 SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid"
+#: :data:`SKY` on a smaller image without an environment map where a surface
+#: mirrors or transmits light (:func:`~.scene_query.has_mirrors`,
+#: :func:`~.scene_query.transmits`) and none is a textured diffuse one: what
+#: they show is an image of the scene that no id tells apart, which ``refine``
+#: traces at its edges, and without textures the passes cannot denoise the
+#: shading alone, so they need most of the scene's spp to meet a full
+#: render's noise (``bench rival`` at 256 px: ``cornell``, the passes at
+#: 0.6 of a full render's time; with textures, ``room``, they meet it at 0.2).
+SPECULAR_REASON = "mirrors or glass, no texture: the MRT's refined edges, denoised grid"
 #: :data:`HOME`'s and :data:`SKY`'s image is kept where its held-out check estimates its RMS
 #: error at most this many times a full render's noise (the default target);
 #: else the passes render the image.  The RMS error weighs the MRT's few
@@ -478,8 +489,11 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
         return SKY, SKY_REASON
     if pixels >= WIDE_PIXELS:
         return HOME, WIDE_REASON
-    if textured_diffuse_shapes(scene).any() and not transmits(scene):
+    textured = textured_diffuse_shapes(scene).any()
+    if textured and not transmits(scene):
         return HOME, TEXTURED_REASON
+    if not textured and (has_mirrors(scene) or transmits(scene)):
+        return SKY, SPECULAR_REASON
     return None
 
 

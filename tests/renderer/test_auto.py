@@ -420,7 +420,8 @@ def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
     assert result.auto.choice.shading and result.auto.choice.label.endswith("textures as shading")
     assert np.isfinite(result.image).all()
     plain = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/cornell.xml", res=192, spp=64)
-    assert not textured_diffuse_shapes(plain).any() and not mitsuba_mrt.render(plain).auto.choice.shading
+    assert not textured_diffuse_shapes(plain).any()
+    assert not mitsuba_mrt.render(plain, noise_threshold=0.05).auto.choice.shading
 
 
 def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_light(variant):
@@ -439,6 +440,24 @@ def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_lig
     assert transmits(room) and auto.unmeasured_plan(room, 128 * 128) is None
     # at 512 x 512 the room's kind no longer matters
     assert auto.unmeasured_plan(room, 512 * 512) == (auto.HOME, auto.WIDE_REASON)
+
+
+def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(variant):
+    from mitsuba_mrt.renderer.scene_query import has_mirrors, textured_diffuse_shapes, transmits
+
+    gallery = ROOT / "scenes_xml/gallery"
+    box = mitsuba_mrt.load_scene(gallery / "cornell.xml", res=192, spp=64)
+    assert has_mirrors(box) and transmits(box) and not textured_diffuse_shapes(box).any()
+    assert auto.unmeasured_plan(box, 192 * 192) == (auto.SKY, auto.SPECULAR_REASON)
+    result = mitsuba_mrt.render(box)
+    assert result.auto.reason == auto.SPECULAR_REASON and result.mode_used == "refine"
+    assert result.params.denoise == "oidn" and np.isfinite(result.image).all()
+    # from 512 x 512 on the id pass, as on any scene without an environment map
+    assert auto.unmeasured_plan(box, 512 * 512) == (auto.HOME, auto.WIDE_REASON)
+    # neither mirrors nor glass: the passes
+    plain = mitsuba_mrt.load_scene(gallery / "instanced.xml", res=64)
+    assert not (has_mirrors(plain) or transmits(plain))
+    assert auto.unmeasured_plan(plain, 64 * 64) is None
 
 
 def test_a_time_limit_is_filled_with_passes(scene):
