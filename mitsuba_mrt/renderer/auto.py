@@ -275,11 +275,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
-    id_pass = None
+    traced = _Traced()
     if escape and denoise and limit is None and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        outcome, id_pass = _mrt_by_kind(scene, tracer, params, width, height, notes,
-                                        probe_start)
+        outcome, traced = _mrt_by_kind(scene, tracer, params, width, height, notes, probe_start)
         if outcome is not None:
             return outcome
     area = effective_area(tracer.sensor.film().rfilter())
@@ -288,17 +287,17 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        outcome, id_pass, probed = _mrt_within(scene, pattern, tracer, params, started, notes)
+        outcome, traced, probed = _mrt_within(scene, pattern, tracer, params, started, notes)
         if outcome is not None:
             return outcome
     if limit is not None and denoise:
         outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
-                                                  notes, probed, id_pass)
+                                                  notes, probed, traced)
         if outcome is not None:
             return _filled_preview(outcome, pattern, tracer, params, started,
                                    recordings() > recorded_before)
     if denoise and not found:
-        surfaces = _surfaces(scene, tracer, width, height, id_pass)
+        surfaces = _surfaces(scene, tracer, width, height, traced.shape_index())
     recorded = recordings()
     costs = {}
 
@@ -351,37 +350,55 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                         None if limit is not None else progress.full_error),
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
                     passes=list(progress.history))
-        return AutoOutcome(plan, image, alpha, progress, id_pass=id_pass)
+        return AutoOutcome(plan, image, alpha, progress, id_pass=traced.id_pass)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
 
 
 def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, notes: list,
-                 probe_start: float) -> tuple[AutoOutcome | None, SparseTrace | None]:
+                 probe_start: float) -> tuple[AutoOutcome | None, _Traced]:
     """(the outcome of :func:`unmeasured_plan`'s MRT plan, its image to be
-    checked, or None: the passes; the image's id pass where the plan traced
-    it).  A large or textured image's plan (:data:`EDGE_TESTED`) traces the
-    id pass first and gives way to the passes, with a note, where more than
-    :data:`WIDE_EDGE_SHARE` of its pixels lie at an edge between ids."""
+    checked, or None: the passes; what the plan traced of every pixel).  A
+    large or textured image's plan (:data:`EDGE_TESTED`) gives way to the
+    passes, with a note, where too many of its pixels lie at an edge between
+    ids (:func:`_edge_tested`)."""
     chosen = unmeasured_plan(scene, width * height)
     if chosen is None:
-        return None, None
-    id_pass = None
+        return None, _Traced()
+    traced = _Traced()
     if chosen[1] in EDGE_TESTED:
-        id_pass = _id_pass(tracer, width, height)  # (a trace: not the plan's time)
-        if _too_many_edges(id_pass, params, width, height, notes):
-            return None, id_pass
+        traced, too_many = _edge_tested(scene, tracer, params, width, height, notes)
+        if too_many:
+            return None, traced
+    id_pass = traced.id_pass  # (a trace of the image: not the plan's time)
     pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
     return AutoOutcome(Plan(replace(chosen[0], spp=tracer.spp), chosen[1], pilot_s=pilot_s,
-                            notes=notes), check=True, id_pass=id_pass), id_pass
+                            notes=notes), check=True, id_pass=id_pass), traced
 
 
-def _too_many_edges(id_pass: SparseTrace, params: MRTParams, width: int, height: int,
+def _edge_tested(scene, tracer, params: MRTParams, width: int, height: int,
+                 notes: list) -> tuple[_Traced, bool]:
+    """(the pixels traced, whether more than :data:`WIDE_EDGE_SHARE` of them
+    lie at an edge between ids: too many for :data:`EDGE_TESTED`'s plans).
+
+    Every edge between shapes is one between ids, so each pixel's shape is
+    traced first, one ray a pixel (:func:`~.trace.trace_shapes`), and the id
+    pass only where few enough pixels lie at an edge between shapes.
+    """
+    shapes = trace_shapes(scene, tracer.sensor, every_pixel(width, height), replay=True)
+    if _too_many_edges(shapes, "shapes", width, height, notes):
+        return _Traced(shapes=shapes), True
+    id_pass = _id_pass(tracer, width, height)
+    ids = id_pass.ids(params.rule_for("idpass"))
+    return _Traced(id_pass, shapes), _too_many_edges(ids, "ids", width, height, notes)
+
+
+def _too_many_edges(labels: np.ndarray, what: str, width: int, height: int,
                     notes: list) -> bool:
-    """Whether more than :data:`WIDE_EDGE_SHARE` of the id pass's pixels lie at
-    an edge between ids (too many for :data:`EDGE_TESTED`'s plans: a note says so)."""
-    share = edge_share(id_pass.ids(params.rule_for("idpass")).reshape(height, width))
+    """Whether more than :data:`WIDE_EDGE_SHARE` of the pixels lie at an edge
+    between ``labels`` (the pixels' ``what``; a note says so where they do)."""
+    share = edge_share(labels.reshape(height, width))
     if share > WIDE_EDGE_SHARE:
-        notes.append(f"{share:.1%} of the pixels at an edge between ids: "
+        notes.append(f"{share:.1%} of the pixels at an edge between {what}: "
                      f"too many for the MRT's grid")
     return share > WIDE_EDGE_SHARE
 
@@ -405,14 +422,14 @@ def _keep(table: dict, key: tuple, value):
 
 def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
                    key: tuple, notes: list, probed: "_Probe | None" = None,
-                   id_pass: SparseTrace | None = None
+                   traced: "_Traced | None" = None
                    ) -> tuple[AutoOutcome | None, tuple | None, bool]:
     """Under a time limit: (the preview's outcome where one pass and OIDN on
     the whole image would end after :data:`PREVIEW_SLACK` times the limit,
     else None; the passes' textured surfaces (:func:`_surfaces`) and whether
     they were looked up, which took time the question then counts).
     ``probed``: the grid probe, where :func:`_mrt_within` has made it;
-    ``id_pass``: the image's id pass, where it has traced it."""
+    ``traced``: what it traced of every pixel."""
     width, height, limit = pattern.width, pattern.height, params.time_limit
     end = started + PREVIEW_SLACK * limit
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
@@ -441,7 +458,8 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     if due():
         return AutoOutcome(preview, grid=grid), None, False
     # the passes' textured pixels, then the same question with their time spent
-    surfaces = _surfaces(scene, tracer, width, height, id_pass)
+    surfaces = _surfaces(scene, tracer, width, height,
+                         None if traced is None else traced.shape_index())
     return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
 
 
@@ -498,17 +516,31 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
 
 
 def _surfaces(scene, tracer, width: int, height: int,
-              id_pass: SparseTrace | None = None) -> tuple | None:
+              shape_index: np.ndarray | None = None) -> tuple | None:
     """(each pixel's shape index, :func:`textured_diffuse_shapes`) where the
     scene has a textured diffuse surface, else None: the shape of every
-    pixel's centre ray (:func:`~.trace.trace_shapes`; ``id_pass``'s where
-    given), for the passes to find the textured pixels."""
+    pixel's centre ray (``shape_index`` where given, else
+    :func:`~.trace.trace_shapes`), for the passes to find the textured pixels."""
     textured = textured_diffuse_shapes(scene)
     if not textured.any():
         return None
-    if id_pass is not None:
-        return id_pass.shape_index, textured
+    if shape_index is not None:
+        return shape_index, textured
     return trace_shapes(scene, tracer.sensor, every_pixel(width, height), replay=True), textured
+
+
+class _Traced(NamedTuple):
+    """What planning traced of every pixel: the id pass (:func:`_id_pass`)
+    and each pixel's shape (:func:`~.trace.trace_shapes`), None where not."""
+
+    id_pass: SparseTrace | None = None
+    shapes: np.ndarray | None = None
+
+    def shape_index(self) -> np.ndarray | None:
+        """Each pixel's shape index, where either trace gives it, else None."""
+        if self.shapes is not None:
+            return self.shapes
+        return None if self.id_pass is None else self.id_pass.shape_index
 
 
 def _id_pass(tracer, width: int, height: int) -> SparseTrace:
@@ -547,11 +579,11 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
 
 
 def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
-                notes: list) -> tuple[AutoOutcome | None, SparseTrace | None, _Probe | None]:
+                notes: list) -> tuple[AutoOutcome | None, _Traced, _Probe | None]:
     """Under a time limit: (:data:`HOME`'s outcome where the scene's kind
     points to it (:func:`unmeasured_plan`) and it is expected to end within
-    :data:`TIME_MARGIN` of the limit, else None; the image's id pass where
-    it was traced; the grid probe where it was made).
+    :data:`TIME_MARGIN` of the limit, else None; what it traced of every
+    pixel (:class:`_Traced`); the grid probe where it was made).
 
     The grid probe's kernel time tells the plan's traces (the grid at the
     scene's spp: :data:`GRID_OVER_PROBE`; the id pass, traced only where
@@ -566,24 +598,27 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     width, height = pattern.width, pattern.height
     chosen = unmeasured_plan(scene, width * height)
     if chosen is None or chosen[0] is not HOME:
-        return None, None, None
+        return None, _Traced(), None
     probed = _grid_probe(pattern, tracer)
     if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
-        return None, None, probed
+        return None, _Traced(), probed
     end = started + TIME_MARGIN * params.time_limit
     rest = (GRID_OVER_PROBE * tracer.spp * probed.execute + FINISH_PER_PIXEL * width * height
             + (probed.host if probed.recorded else 0.0))
     if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + rest > end:
-        return None, None, probed
-    id_pass = _id_pass(tracer, width, height)
-    if chosen[1] in EDGE_TESTED and _too_many_edges(id_pass, params, width, height, notes):
-        return None, id_pass, probed
+        return None, _Traced(), probed
+    if chosen[1] in EDGE_TESTED:
+        traced, too_many = _edge_tested(scene, tracer, params, width, height, notes)
+        if too_many:
+            return None, traced, probed
+    else:
+        traced = _Traced(_id_pass(tracer, width, height))
     if time.perf_counter() + rest > end:
-        return None, id_pass, probed
+        return None, traced, probed
     plan = Plan(replace(chosen[0], spp=tracer.spp), WITHIN_REASON.format(chosen[1]),
                 time_limit=params.time_limit, notes=notes,
-                pilot_s=time.perf_counter() - started - id_pass.seconds)
-    return AutoOutcome(plan, id_pass=id_pass), id_pass, probed
+                pilot_s=time.perf_counter() - started - traced.id_pass.seconds)
+    return AutoOutcome(plan, id_pass=traced.id_pass), traced, probed
 
 
 def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> bool:
