@@ -462,8 +462,9 @@ class Launch(NamedTuple):
 class LaunchCost:
     """What a launch of passes costs: ``fixed + per_spp * spp`` seconds, the
     line through the replayed launches so far (``launches``: :class:`Launch`
-    records, or plain (spp, seconds, recorded) tuples) moved up until none
-    took longer than it says; a launch of an spp not launched before records
+    records, or plain (spp, seconds, recorded) tuples; a recorded one less
+    what recording took, where measured) moved up until none took longer
+    than it says; a launch of an spp not launched before records
     anew, which adds :attr:`record_s`.  Where a new spp compiles no kernel
     (``spp_compiles`` False: a sampler that does not bake its spp in,
     :func:`~.scene_query.sampler_bakes_spp`), what a launch spent compiling
@@ -537,15 +538,23 @@ class LaunchCost:
     def _line(self) -> tuple[float, float]:
         """(fixed, per_spp) of a replayed launch: through the replayed
         launches (all of them where none was)."""
-        points = [launch for launch in self.launches if not launch.recorded] or [
+        # the replayed launches, and the recorded ones less what recording them
+        # took where measured (but a first, which also paid for first uses): a
+        # line through small replays alone misses what larger launches cost
+        points = [launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
+                  for launch in self.launches if not launch.recorded
+                  or (launch.recording is not None and not launch.first)] or [
             launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
-            for launch in self.launches]  # (a replay: less what recording took)
+            for launch in self.launches]
         if not points:
             return 0.0, 0.0
         spp = np.array([launch.spp for launch in points], dtype=float)
         seconds = np.array([launch.seconds for launch in points])
-        if len(set(spp)) > 1:
-            fixed = float(np.clip(np.polyfit(spp, seconds, 1)[1], 0.0, seconds.min()))
+        slope = float(np.polyfit(spp, seconds, 1)[0]) if len(set(spp)) > 1 else 0.0
+        if slope > 0:  # the fitted slope, moved up until no launch took longer
+            fixed = float(np.clip((seconds - slope * spp).max(), 0.0, seconds.min()))
+        elif len(set(spp)) > 1:
+            fixed = 0.0
         elif all(launch.execute is not None for launch in points):
             fixed = float(np.clip(min(launch.seconds - launch.execute for launch in points),
                                   0.0, seconds.min()))

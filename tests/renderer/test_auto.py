@@ -729,6 +729,24 @@ def test_a_first_launch_s_recording_is_a_new_spp_s_cost_only_until_another_recor
     assert cost.record_s == 0.0 and cost(4) == pytest.approx(0.005 + 4 * 0.015)
 
 
+def test_a_recorded_launch_s_replay_time_is_on_the_line():
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.renderer.progressive import Launch
+
+    # a time-limited render's launches (materials at 512 px): the replays were of 1 and 2
+    # spp, the larger launches recorded a new spp each (recording measured)
+    cost = progressive.LaunchCost([
+        Launch(1, 0.228, True, first=True, recording=0.016), Launch(1, 0.060),
+        Launch(6, 0.205, True, recording=0.016), Launch(2, 0.075),
+        Launch(14, 0.429, True, recording=0.016), Launch(4, 0.114, True, recording=0.008),
+        Launch(2, 0.073)])
+    # a 39-spp launch then took 1.06 s; the replays alone said 0.58, a slope fitted
+    # through every launch and turned until none took longer 1.69
+    assert 1.0 < cost(39) < 1.2
+    fixed, per_spp = cost._line()
+    assert 0.026 < per_spp < 0.03 and 0 <= fixed < 0.06
+
+
 def test_a_launch_s_kernels_run_time_and_the_cost_s_first_launch_are_kept(scene, monkeypatch):
     from mitsuba_mrt.renderer import progressive
 
