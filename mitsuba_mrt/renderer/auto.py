@@ -131,15 +131,16 @@ WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, 
 #: (``room`` at 256 px: the check rejects ``idpass+oidn``, then the passes).
 TEXTURED_REASON = ("textured diffuse surfaces, nothing transmits light: the MRT's id pass "
                    "gives the texture, denoised grid")
-#: The reasons whose plan first traces the id pass and gives way to the
-#: passes where too many of its pixels lie at an edge (:func:`_too_many_edges`).
+#: The reasons whose plan gives way to the passes where too many of the
+#: image's pixels lie at an edge between ids (:func:`_edge_tested`).
 EDGE_TESTED = (WIDE_REASON, TEXTURED_REASON)
 #: :data:`HOME` on such an image is traced only where at most this share of
-#: its pixels lie at an edge between ids (:func:`~mitsuba_mrt.recon.ids.edge_share`
-#: of the id pass, which ``idpass`` then reuses): where more do, the regions
-#: are small beside the grid's spacing and hold few of its samples each
-#: (``bench rival`` at 512 px: ``instanced``, 5.5 %, is the one gallery scene
-#: where ``idpass+oidn`` trails the passes; the others have 1.1-3.6 %).
+#: its pixels lie at an edge between shapes, then between ids
+#: (:func:`~mitsuba_mrt.recon.ids.edge_share` of the id pass, which
+#: ``idpass`` then reuses): where more do, the regions are small beside the
+#: grid's spacing and hold few of its samples each (``bench rival`` at 512
+#: px: ``instanced``, 5.5 %, is the one gallery scene where ``idpass+oidn``
+#: is no better than the passes; the others have 1.1-3.6 %).
 WIDE_EDGE_SHARE = 0.045
 #: The plan, under the same conditions, where an environment map lights the
 #: scene: mode ``refine``, OIDN on its grid.  Light from every direction
