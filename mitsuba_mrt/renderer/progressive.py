@@ -537,7 +537,8 @@ class LaunchCost:
 
     def _line(self) -> tuple[float, float]:
         """(fixed, per_spp) of a replayed launch: through the replayed
-        launches (all of them where none was)."""
+        launches and the recorded ones whose recording was measured (all of
+        them where none was), each less what recording took."""
         # the replayed launches, and the recorded ones less what recording them
         # took where measured (but a first, which also paid for first uses): a
         # line through small replays alone misses what larger launches cost
