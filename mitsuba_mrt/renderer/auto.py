@@ -203,6 +203,11 @@ KEPT_COSTS = 16
 #: launch adds by recording theirs (both trace the integrator anew), which
 #: a replayed probe's time does not show.
 _probe_recording_s: dict = {}
+#: The grid probe's kernel run time per the same keys (the last
+#: :data:`KEPT_COSTS`), from its last replay: where it says :data:`HOME`
+#: cannot end within a time limit, the next render of the scene is not
+#: probed for it (:func:`_mrt_within`).
+_probe_execute: dict = {}
 
 
 @dataclass
@@ -288,7 +293,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        outcome, traced, probed = _mrt_within(scene, pattern, tracer, params, started, notes)
+        outcome, traced, probed = _mrt_within(scene, pattern, tracer, params, started, notes,
+                                              key)
         if outcome is not None:
             return outcome
     if limit is not None and denoise:
@@ -580,7 +586,8 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
 
 
 def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
-                notes: list) -> tuple[AutoOutcome | None, _Traced, _Probe | None]:
+                notes: list, key: tuple | None = None
+                ) -> tuple[AutoOutcome | None, _Traced, _Probe | None]:
     """Under a time limit: (:data:`HOME`'s outcome where the scene's kind
     points to it (:func:`unmeasured_plan`) and it is expected to end within
     :data:`TIME_MARGIN` of the limit, else None; what it traced of every
@@ -594,19 +601,31 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     that compiles kernels per spp (:func:`~.scene_query.sampler_bakes_spp`)
     is not planned so in such a process: its compilation cannot be told.
     The plan's image is not checked (:func:`keeps`): the check's fallback,
-    the passes, would start after the limit.
+    the passes, would start after the limit.  Where the last replayed probe
+    of ``key`` (:data:`_probe_execute`) says the plan cannot end within the
+    limit, no probe is traced.
     """
     width, height = pattern.width, pattern.height
     chosen = unmeasured_plan(scene, width * height)
     if chosen is None or chosen[0] is not HOME:
         return None, _Traced(), None
+    end = started + TIME_MARGIN * params.time_limit
+
+    def rest(execute: float, host: float = 0.0) -> float:
+        """The plan's time after its id pass, from the probe's kernel run time."""
+        return GRID_OVER_PROBE * tracer.spp * execute + FINISH_PER_PIXEL * width * height + host
+
+    known = _probe_execute.get(key)
+    if known is not None and (time.perf_counter() + ID_PASS_OVER_PROBE * known + rest(known)
+                              > end):
+        return None, _Traced(), None
     probed = _grid_probe(pattern, tracer)
     if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
         return None, _Traced(), probed
-    end = started + TIME_MARGIN * params.time_limit
-    rest = (GRID_OVER_PROBE * tracer.spp * probed.execute + FINISH_PER_PIXEL * width * height
-            + (probed.host if probed.recorded else 0.0))
-    if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + rest > end:
+    if key is not None and not probed.recorded:
+        _keep(_probe_execute, key, probed.execute)
+    left = rest(probed.execute, probed.host if probed.recorded else 0.0)
+    if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + left > end:
         return None, _Traced(), probed
     if chosen[1] in EDGE_TESTED:
         traced, too_many = _edge_tested(scene, tracer, params, width, height, notes)
@@ -614,7 +633,7 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
             return None, traced, probed
     else:
         traced = _Traced(_id_pass(tracer, width, height))
-    if time.perf_counter() + rest > end:
+    if time.perf_counter() + left > end:
         return None, traced, probed
     plan = Plan(replace(chosen[0], spp=tracer.spp), WITHIN_REASON.format(chosen[1]),
                 time_limit=params.time_limit, notes=notes,

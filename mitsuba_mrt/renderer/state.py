@@ -28,6 +28,7 @@ def clear_caches() -> None:
     auto._first_round_s.clear()
     auto._launch_costs.clear()
     auto._probe_recording_s.clear()
+    auto._probe_execute.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()
     pixel_filter._TABLES.clear()

@@ -224,6 +224,28 @@ def test_a_time_limit_too_short_for_the_id_pass_plan_traces_no_id_pass(variant, 
         assert mitsuba_mrt.render(scene, time_limit=limit).mode_used != "idpass"
 
 
+def test_a_last_probe_that_rules_the_id_pass_plan_out_spares_the_next_render_s_probe(
+        variant, monkeypatch):
+    scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    for limit in (None, 0.02):  # (kernels recorded: the probes below replay)
+        mitsuba_mrt.render(scene, time_limit=limit)
+    monkeypatch.setattr(auto, "_probe_execute", {})
+    probes = []
+    within = auto._mrt_within
+
+    def spy(*args):
+        out = within(*args)
+        probes.append(out[2] is not None)
+        return out
+    monkeypatch.setattr(auto, "_mrt_within", spy)
+    # the first render probes, and its probe says the plan cannot end in 20 ms; the
+    # next is not probed for it; a longer limit is probed again, and takes the plan
+    assert mitsuba_mrt.render(scene, time_limit=0.02).mode_used != "idpass"
+    assert mitsuba_mrt.render(scene, time_limit=0.02).mode_used != "idpass"
+    assert mitsuba_mrt.render(scene, time_limit=60.0).mode_used == "idpass"
+    assert probes == [True, False, True] and len(auto._probe_execute) == 1
+
+
 def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(variant):
     # an area light, diffuse surfaces, 512 x 512: the id pass, its grid denoised,
     # kept because its held-out check finds it near a full render's noise
