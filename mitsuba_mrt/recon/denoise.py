@@ -102,7 +102,7 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
     """The seconds :func:`denoise_image` (or :func:`denoise_shading`) is
     expected to take on ``pixels`` pixels at ``quality``, its filter's
     set-up left out (None before any call at ``quality`` in this process):
-    the last call's on that many pixels;
+    the recent calls' on that many pixels (:data:`RECENT_CALLS`);
     else a line through the last calls' times on the two largest images (a
     fixed cost and one per pixel), or the one image's time scaled to
     ``pixels``."""
@@ -134,7 +134,7 @@ FIRST_CALL_SHARE = 0.35
 
 def expected_seconds(pixels: int, quality: str) -> float:
     """What the next call on ``pixels`` pixels at ``quality`` is expected to
-    take: the last call's on that many pixels; else :func:`denoise_seconds`
+    take: the recent calls' on that many pixels; else :func:`denoise_seconds`
     (from other sizes), or before any call at ``quality`` in this process
     :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
     (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
@@ -229,10 +229,22 @@ def _run_filter(color, albedo, normal, quality: str, clean_aux: bool) -> tuple[n
     return output.astype(np.float64), setup
 
 
+#: A size's expected time is the median of its last this many calls (the
+#: lower of two): one slow call (the machine's noise) would otherwise make
+#: a time-limited render take a preview, whose OIDN call is on its grid
+#: alone, so that no later call on the whole image measured it again.
+RECENT_CALLS = 3
+
+
 def _record(quality: str, shape: tuple, seconds: float) -> None:
     """Note what a call on an image of ``shape`` at ``quality`` took
-    (:func:`denoise_seconds`)."""
-    _state.setdefault("seconds", {}).setdefault(quality, {})[shape[0] * shape[1]] = seconds
+    (:func:`denoise_seconds`: the median of the last :data:`RECENT_CALLS`)."""
+    pixels = shape[0] * shape[1]
+    recent = _state.setdefault("recent", {}).setdefault((quality, pixels), [])
+    recent.append(seconds)
+    del recent[:-RECENT_CALLS]
+    typical = sorted(recent)[(len(recent) - 1) // 2]
+    _state.setdefault("seconds", {}).setdefault(quality, {})[pixels] = typical
 
 
 def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | None,

@@ -91,6 +91,18 @@ def test_its_cost_is_known_after_a_call(oidn):
     denoise.release()
 
 
+def test_one_slow_call_does_not_set_what_a_size_is_expected_to_take():
+    denoise.release()
+    denoise._record("fast", (256, 256), 0.08)  # a size's first call (its buffers made)
+    denoise._record("fast", (256, 256), 0.05)
+    assert denoise.denoise_seconds(256 * 256, "fast") == 0.05  # the lower of two
+    denoise._record("fast", (256, 256), 0.30)  # the machine's noise
+    assert denoise.denoise_seconds(256 * 256, "fast") == 0.08  # the median of three
+    denoise._record("fast", (256, 256), 0.06)  # the last three: 0.05, 0.30, 0.06
+    assert denoise.denoise_seconds(256 * 256, "fast") == 0.06
+    denoise.release()
+
+
 def test_before_any_call_its_cost_is_the_prior_on_drjits_threads(oidn):
     import drjit as dr
 
