@@ -586,8 +586,7 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
 
 
 def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
-                notes: list, key: tuple | None = None
-                ) -> tuple[AutoOutcome | None, _Traced, _Probe | None]:
+                notes: list, key: tuple) -> tuple[AutoOutcome | None, _Traced, _Probe | None]:
     """Under a time limit: (:data:`HOME`'s outcome where the scene's kind
     points to it (:func:`unmeasured_plan`) and it is expected to end within
     :data:`TIME_MARGIN` of the limit, else None; what it traced of every
@@ -615,17 +614,20 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
         """The plan's time after its id pass, from the probe's kernel run time."""
         return GRID_OVER_PROBE * tracer.spp * execute + FINISH_PER_PIXEL * width * height + host
 
+    def ends_late(execute: float, host: float = 0.0) -> bool:
+        """Whether the plan, its id pass included, would end after ``end``."""
+        return time.perf_counter() + ID_PASS_OVER_PROBE * execute + rest(execute, host) > end
+
     known = _probe_execute.get(key)
-    if known is not None and (time.perf_counter() + ID_PASS_OVER_PROBE * known + rest(known)
-                              > end):
+    if known is not None and ends_late(known):
         return None, _Traced(), None
     probed = _grid_probe(pattern, tracer)
     if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
         return None, _Traced(), probed
-    if key is not None and not probed.recorded:
+    if not probed.recorded:
         _keep(_probe_execute, key, probed.execute)
-    left = rest(probed.execute, probed.host if probed.recorded else 0.0)
-    if time.perf_counter() + ID_PASS_OVER_PROBE * probed.execute + left > end:
+    host = probed.host if probed.recorded else 0.0
+    if ends_late(probed.execute, host):
         return None, _Traced(), probed
     if chosen[1] in EDGE_TESTED:
         traced, too_many = _edge_tested(scene, tracer, params, width, height, notes)
@@ -633,7 +635,7 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
             return None, traced, probed
     else:
         traced = _Traced(_id_pass(tracer, width, height))
-    if time.perf_counter() + left > end:
+    if time.perf_counter() + rest(probed.execute, host) > end:
         return None, traced, probed
     plan = Plan(replace(chosen[0], spp=tracer.spp), WITHIN_REASON.format(chosen[1]),
                 time_limit=params.time_limit, notes=notes,

@@ -539,22 +539,21 @@ class LaunchCost:
         """(fixed, per_spp) of a replayed launch: through the replayed
         launches and the recorded ones whose recording was measured (all of
         them where none was), each less what recording took."""
-        # the replayed launches, and the recorded ones less what recording them
-        # took where measured (but a first, which also paid for first uses): a
-        # line through small replays alone misses what larger launches cost
+        # (a cost's first launch also paid for first uses; a line through small
+        # replays alone misses what larger launches cost)
+        measured = [launch for launch in self.launches if not launch.recorded
+                    or (launch.recording is not None and not launch.first)]
         points = [launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
-                  for launch in self.launches if not launch.recorded
-                  or (launch.recording is not None and not launch.first)] or [
-            launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
-            for launch in self.launches]
+                  for launch in measured or self.launches]
         if not points:
             return 0.0, 0.0
         spp = np.array([launch.spp for launch in points], dtype=float)
         seconds = np.array([launch.seconds for launch in points])
-        slope = float(np.polyfit(spp, seconds, 1)[0]) if len(set(spp)) > 1 else 0.0
+        sizes = len(set(spp))
+        slope = float(np.polyfit(spp, seconds, 1)[0]) if sizes > 1 else 0.0
         if slope > 0:  # the fitted slope, moved up until no launch took longer
             fixed = float(np.clip((seconds - slope * spp).max(), 0.0, seconds.min()))
-        elif len(set(spp)) > 1:
+        elif sizes > 1:
             fixed = 0.0
         elif all(launch.execute is not None for launch in points):
             fixed = float(np.clip(min(launch.seconds - launch.execute for launch in points),
