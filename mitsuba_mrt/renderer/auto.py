@@ -191,7 +191,9 @@ WITHIN_REASON = "{}; within the time limit"
 #: Seconds from a time-limited render's start to the end of its first round
 #: of passes, per traced objects and pixel count, from the last such render
 #: in this process whose kernels were all replayed: what tells a limit too
-#: short for one pass and OIDN before a pass is traced.
+#: short for one pass and OIDN before a pass is traced.  A time that gives a
+#: preview is dropped: a preview traces no round, so one slow round would
+#: otherwise give previews for good.
 _first_round_s: dict = {}
 #: The passes' launches (:class:`~.progressive.LaunchCost`), per traced
 #: objects and pixel count, of the last :data:`KEPT_COSTS` such keys: what
@@ -447,6 +449,8 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         first_s = time.perf_counter() - started + launches(launches.cheapest())
     if first_s is not None:
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
+        if due:  # (the next render asks the launches' line or a probe)
+            _first_round_s.pop(key, None)
         return (AutoOutcome(preview) if due else None), None, False
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
     grid, pass_s = probed.grid, probed.pass_s

@@ -401,6 +401,20 @@ def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, 
     assert again.auto.choice.kind == "denoised"
 
 
+def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monkeypatch):
+    monkeypatch.setattr(auto, "_launch_costs", {})
+    monkeypatch.setattr(auto, "_first_round_s", {})
+    # passes: their launches are kept
+    assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
+    (key,) = auto._launch_costs
+    auto._first_round_s[key] = 1e3  # a first round that took far longer than the limit
+    slow = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert slow.auto.choice == auto.PREVIEW and key not in auto._first_round_s
+    # a preview traces no round: the next render plans from the passes' launches
+    again = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert again.auto.choice.kind == "denoised"
+
+
 def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_launched(
         monkeypatch):
     monkeypatch.setattr(auto, "_launch_costs", {})
