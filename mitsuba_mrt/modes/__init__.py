@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import MRTError
 from ..recon.bounds import suppress_fireflies
-from ..recon.compose import demodulate, safe_albedo
+from ..recon.compose import safe_albedo
 from ..recon.sampling import SamplePattern
 from ..recon.smooth import smooth_grid
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer, check_radiance
@@ -121,12 +121,16 @@ def smoothed_trace(pattern: SamplePattern, trace: SparseTrace, params: MRTParams
         return trace
     grid = pattern.grid_shape + (3,)
     albedo = safe_albedo(trace.albedo)
-    values = demodulate(trace.radiance, trace.albedo).reshape(grid)
-    noise = (trace.variance / (trace.spp * albedo * albedo)).reshape(grid)
+    values = (np.asarray(trace.radiance, dtype=np.float64) / albedo).reshape(grid)  # demodulated
+    # (in place where the arrays are this function's own: a fresh array costs its pages)
+    noise = np.multiply(albedo, trace.spp)
+    noise *= albedo
+    noise = np.divide(trace.variance, noise, out=noise).reshape(grid)
     ids = trace.ids(params.rule_for(mode)).reshape(pattern.grid_shape)
     suppressed, fireflies = suppress_fireflies(ids, values)
     fixed = (suppressed != values).any(axis=-1) if fireflies else None
     out = smooth_grid(ids, values, noise, params.noise_smoothing, fixed)
-    changed = (out != values).reshape(-1, 3)
-    radiance = np.where(changed, out.reshape(-1, 3) * albedo, trace.radiance)
+    kept = (out == values).reshape(-1, 3)
+    radiance = np.multiply(out.reshape(-1, 3), albedo, out=albedo)
+    np.copyto(radiance, trace.radiance, where=kept)
     return replace(trace, radiance=radiance)

@@ -15,6 +15,8 @@ integrator) are left as they are.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 #: Default strength: how many noise standard deviations apart two samples
@@ -66,6 +68,9 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
     total = values.copy()          # the sample itself, weight 1
     weight = np.ones((nr, nc))
     scale = -0.5 / (strength * strength * channels)
+    # the shifts' temporaries, made once: a fresh array costs its pages
+    scratch = _Scratch(np.empty((nr, nc, channels)), np.empty((nr, nc, channels)),
+                       np.empty((nr, nc)))
     # a pair's weight before ``usable`` is the same from either end: each
     # shift's is kept for the opposite shift, which reads the same pairs
     pairs = {}
@@ -80,23 +85,44 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
             if base is None:
                 base = pairs[dy, dx] = _pair_weights(values[here], values[there], noise[here],
                                                      noise[there], scale,
-                                                     grid_ids[here] == grid_ids[there])
-            w = base * usable[there]
-            total[here] += w[..., None] * values[there]
+                                                     grid_ids[here] == grid_ids[there], scratch)
+            size = base.shape
+            w = np.multiply(base, usable[there], out=scratch.per_sample[:size[0], :size[1]])
+            weighted = np.multiply(values[there], w[..., None],
+                                   out=scratch.first[:size[0], :size[1]])
+            total[here] += weighted
             weight[here] += w
-    out = total / weight[..., None]
+    out = np.divide(total, weight[..., None], out=total)
     keep = ~usable | (noise.max(axis=-1) <= 0)
     out[keep] = values[keep]
     return out
 
 
+class _Scratch(NamedTuple):
+    """:func:`smooth_grid`'s reused temporaries: two of the values' shape, one
+    of the grid's (each shift and pair takes views of their overlap)."""
+
+    first: np.ndarray
+    second: np.ndarray
+    per_sample: np.ndarray
+
+
 def _pair_weights(a: np.ndarray, b: np.ndarray, noise_a: np.ndarray, noise_b: np.ndarray,
-                  scale: float, same_id: np.ndarray) -> np.ndarray:
+                  scale: float, same_id: np.ndarray, scratch: _Scratch) -> np.ndarray:
     """The weights of the pairs of samples ``a`` and ``b`` (elementwise):
     ``exp(scale * sum_c d_c^2 / combined noise_c)``, 0 across ids; the same
-    for (``b``, ``a``), bit for bit."""
-    diff = a - b
-    combined = noise_a + noise_b
+    for (``b``, ``a``), bit for bit.  Its temporaries are views of ``scratch``."""
+    rows, cols = same_id.shape
+    diff = np.subtract(a, b, out=scratch.first[:rows, :cols])
+    combined = np.add(noise_a, noise_b, out=scratch.second[:rows, :cols])
+    silent = ~(combined > 0)
+    # where no noise: 0 for equal samples, else never averaged
+    unweighed = np.where(diff[silent] == 0, 0.0, np.inf)
+    squared = np.multiply(diff, diff, out=diff)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(combined > 0, diff * diff / combined, np.where(diff == 0, 0.0, np.inf))
-    return np.exp(scale * ratio.sum(axis=-1)) * same_id
+        ratio = np.divide(squared, combined, out=combined)
+    ratio[silent] = unweighed
+    weights = np.sum(ratio, axis=-1)
+    np.multiply(weights, scale, out=weights)
+    np.exp(weights, out=weights)
+    return np.multiply(weights, same_id, out=weights)

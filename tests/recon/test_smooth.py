@@ -64,6 +64,41 @@ def test_strength_zero_is_off():
                           values)
 
 
+def _by_the_formula(ids, values, noise, strength, fixed):
+    """smooth_grid's docstring, one sample at a time."""
+    nr, nc, channels = values.shape
+    out = values.copy()
+    for y in range(nr):
+        for x in range(nc):
+            if fixed[y, x] or noise[y, x].max() <= 0:
+                continue
+            total, weight = values[y, x].copy(), 1.0
+            for v in range(max(y - 1, 0), min(y + 2, nr)):
+                for u in range(max(x - 1, 0), min(x + 2, nc)):
+                    if (v, u) == (y, x) or fixed[v, u] or ids[v, u] != ids[y, x]:
+                        continue
+                    d = values[y, x] - values[v, u]
+                    both = noise[y, x] + noise[v, u]
+                    ratio = [dc * dc / bc if bc > 0 else (0.0 if dc == 0 else np.inf)
+                             for dc, bc in zip(d, both)]
+                    w = np.exp(-sum(ratio) / (2 * strength ** 2 * channels))
+                    total += w * values[v, u]
+                    weight += w
+            out[y, x] = total / weight
+    return out
+
+
+def test_the_smoothing_is_its_formula():
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        nr, nc = rng.integers(1, 9, 2)
+        values = np.round(rng.normal(1, 0.2, (nr, nc, 3)), 1)  # (some equal samples)
+        noise = np.abs(rng.normal(0, 0.05, (nr, nc, 3))) * rng.integers(0, 2, (nr, nc, 3))
+        ids, fixed = rng.integers(0, 2, (nr, nc)), rng.random((nr, nc)) < 0.2
+        np.testing.assert_allclose(smooth_grid(ids, values, noise, 1.5, fixed),
+                                   _by_the_formula(ids, values, noise, 1.5, fixed), rtol=1e-12)
+
+
 def trace_of(pattern, radiance, variance, spp=16):
     n = pattern.count
     return SparseTrace(radiance.reshape(-1, 3), np.full((n, 3), 0.5), np.ones(n, np.int64),
