@@ -409,7 +409,7 @@ def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monke
     (key,) = auto._launch_costs
     auto._first_round_s[key] = 1e3  # a first round that took far longer than the limit
     slow = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert slow.auto.choice == auto.PREVIEW and key not in auto._first_round_s
+    assert slow.auto.reason == auto.PREVIEW_REASON and key not in auto._first_round_s
     # a preview traces no round: the next render plans from the passes' launches
     again = mitsuba_mrt.render(scene, time_limit=10.0)
     assert again.auto.choice.kind == "denoised"
