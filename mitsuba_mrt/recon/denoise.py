@@ -159,11 +159,13 @@ def _device(oidn):
 
 
 def _filter(oidn, device, quality: str, guides: tuple, clean_aux: bool, shape: tuple):
-    """The RT filter for these settings and image size (the least recently used goes)."""
+    """The RT filter for these settings and image size (the least recently
+    used goes), and whether it was made here."""
     filters = _state.setdefault("filters", OrderedDict())
     key = (quality, guides, clean_aux, shape)
     flt = filters.get(key)
-    if flt is None:
+    made = flt is None
+    if made:
         flt = device.new_filter("RT")
         flt.hdr = True
         flt.clean_aux = clean_aux
@@ -173,7 +175,7 @@ def _filter(oidn, device, quality: str, guides: tuple, clean_aux: bool, shape: t
         while len(filters) > FILTERS_KEPT:
             filters.popitem(last=False)
     filters.move_to_end(key)
-    return flt
+    return flt, made
 
 
 def _float3(image: np.ndarray) -> np.ndarray:
@@ -191,14 +193,15 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     ``quality`` is one of :data:`QUALITIES`.
     """
     start = time.perf_counter()
-    output, setup = _run_filter(color, albedo, normal, quality, clean_aux)
-    _record(quality, output.shape[:2], time.perf_counter() - start - setup)
+    output, setup, first = _run_filter(color, albedo, normal, quality, clean_aux)
+    _record(quality, output.shape[:2], time.perf_counter() - start - setup, first)
     return output
 
 
-def _run_filter(color, albedo, normal, quality: str, clean_aux: bool) -> tuple[np.ndarray, float]:
+def _run_filter(color, albedo, normal, quality: str,
+                clean_aux: bool) -> tuple[np.ndarray, float, bool]:
     """:func:`denoise_image`'s work: (the float64 output, the seconds of its
-    filter's set-up)."""
+    filter's set-up, whether this was the filter's first call)."""
     oidn = _oidn()
     if normal is not None and albedo is None:
         normal = None
@@ -211,7 +214,7 @@ def _run_filter(color, albedo, normal, quality: str, clean_aux: bool) -> tuple[n
     with _lock:
         try:
             device = _device(oidn)
-            flt = _filter(oidn, device, quality, tuple(images), clean_aux, output.shape)
+            flt, first = _filter(oidn, device, quality, tuple(images), clean_aux, output.shape)
             images["output"] = output
             try:
                 for name, image in images.items():
@@ -226,7 +229,7 @@ def _run_filter(color, albedo, normal, quality: str, clean_aux: bool) -> tuple[n
         except oidn.Error as exc:
             raise MRTError(f"Open Image Denoise failed: "
                            f"{str(exc).strip().splitlines()[0]}") from None
-    return output.astype(np.float64), setup
+    return output.astype(np.float64), setup, first
 
 
 #: A size's expected time is the median of its last this many calls (the
@@ -236,9 +239,13 @@ def _run_filter(color, albedo, normal, quality: str, clean_aux: bool) -> tuple[n
 RECENT_CALLS = 3
 
 
-def _record(quality: str, shape: tuple, seconds: float) -> None:
+def _record(quality: str, shape: tuple, seconds: float, first: bool = False) -> None:
     """Note what a call on an image of ``shape`` at ``quality`` took
-    (:func:`denoise_seconds`: the median of the last :data:`RECENT_CALLS`)."""
+    (:func:`denoise_seconds`: the median of the last :data:`RECENT_CALLS`);
+    a filter's ``first`` call as what a later one is expected to take, less
+    :data:`FIRST_CALL_SHARE` (it made the filter's buffers)."""
+    if first:
+        seconds /= 1.0 + FIRST_CALL_SHARE
     pixels = shape[0] * shape[1]
     recent = _state.setdefault("recent", {}).setdefault((quality, pixels), [])
     recent.append(seconds)
@@ -264,10 +271,10 @@ def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | 
     texture = safe_albedo(albedo)
     surface = (np.asarray(albedo) > 0).any(axis=-1, keepdims=True) | textured
     flat = np.where(textured, surface, albedo).astype(np.float64)
-    out, setup = _run_filter(np.where(textured, np.asarray(color, dtype=np.float64) / texture,
-                                      color), flat, normal, quality, False)
+    shading = np.where(textured, np.asarray(color, dtype=np.float64) / texture, color)
+    out, setup, first = _run_filter(shading, flat, normal, quality, False)
     out = np.where(textured, out * texture, out)
-    _record(quality, out.shape[:2], time.perf_counter() - start - setup)  # (the division in)
+    _record(quality, out.shape[:2], time.perf_counter() - start - setup, first)  # (the division in)
     return out
 
 

@@ -103,6 +103,20 @@ def test_one_slow_call_does_not_set_what_a_size_is_expected_to_take():
     denoise.release()
 
 
+def test_a_filters_first_call_counts_as_what_a_later_one_takes(oidn):
+    denoise.release()
+    image = np.full((8, 8, 3), 0.5)
+    # the first call on a size makes its filter (and the filter its buffers)
+    firsts = [denoise._run_filter(image, *_guides(image.shape), "fast", False)[2]
+              for _ in range(2)]
+    assert firsts == [True, False]
+    denoise.release()
+    denoise._record("fast", (256, 256), 0.05 * (1 + denoise.FIRST_CALL_SHARE), first=True)
+    assert denoise.denoise_seconds(256 * 256, "fast") == pytest.approx(0.05)
+    assert denoise.expected_seconds(256 * 256, "fast") == pytest.approx(0.05)
+    denoise.release()
+
+
 def test_before_any_call_its_cost_is_the_prior_on_drjits_threads(oidn):
     import drjit as dr
 
