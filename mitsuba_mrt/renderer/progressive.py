@@ -384,21 +384,26 @@ def estimate_rows(height: int, width: int) -> np.ndarray:
 
 
 def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
-                half: int | None) -> None:
+                half: int | None, guides: bool) -> None:
     """Trace every pixel at ``spp`` (launch number ``launch``: its own seed)
     into ``half`` of ``passes`` (None: its even and odd samples into each,
-    or with :attr:`Passes.companion` all of it into half 0 and a launch of
-    the estimate's pixels into half 1), with the guides while they are wanted."""
-    guides = passes.count < passes.guide_spp
+    or with :attr:`Passes.companion` all of it into half 0), with the guides
+    where ``guides``."""
     companion = half is None and passes.companion is not None
     trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
                                      ids=False, box=True, replay=True,
                                      halves=half is None and not companion)
     passes.add(trace, 0 if companion else half, guides)
-    if companion:  # (the guides as the launch had them: the same kernels)
-        passes.add_companion(replace(tracer, spp=spp)(
-            xy[passes.crop[passes.companion]], stream=SeedStream.ESTIMATE + launch,
-            aovs=guides, ids=False, box=True, replay=True))
+
+
+def _trace_companion(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
+                     guides: bool) -> None:
+    """Launch ``launch``'s companion: the pixels of :attr:`Passes.companion`
+    at ``spp`` with another seed, into half 1 (with the guides where the
+    launch had them: the same kernels)."""
+    passes.add_companion(replace(tracer, spp=spp)(
+        xy[passes.crop[passes.companion]], stream=SeedStream.ESTIMATE + launch,
+        aovs=guides, ids=False, box=True, replay=True))
 
 
 def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full_spp: int,
@@ -627,7 +632,7 @@ class LaunchCost:
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
           cost: LaunchCost, max_spp: int, launch: int, halves: bool, exact=None,
-          least: int = 1) -> None:
+          least: int = 1, companion: float = 1.0) -> None:
     """Passes that fill the time before ``until`` (a ``time.perf_counter()``
     value) that a whole round does not: launches of the most spp that
     ``cost`` expects to end by then (times :data:`ROUND_SAFETY`; a new count
@@ -635,9 +640,10 @@ def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: flo
     count ``exact(spp)`` the sampler takes (:func:`~.scene_query.sample_count_at_most`).
     With ``halves`` each launch goes into both halves, else into one half
     and the next into the other; a launch has at least ``least`` spp (2
-    where both halves are to have samples)."""
+    where both halves are to have samples).  ``companion``: what a launch
+    takes with its companion over what it takes alone (``cost``'s)."""
     while passes.count < max_spp:
-        fits = cost.fits((until - time.perf_counter()) / ROUND_SAFETY)
+        fits = cost.fits((until - time.perf_counter()) / (ROUND_SAFETY * companion))
         spp = min(max_spp - passes.count, fits)
         spp = exact(spp) if exact is not None and spp > 0 else spp
         if spp < least:
@@ -660,17 +666,23 @@ def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int,
 
 def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half: int | None,
             cost: LaunchCost) -> float:
-    """:func:`_trace_pass`, its seconds (returned) and whether it recorded added to ``cost``."""
+    """:func:`_trace_pass`, then the launch's companion where one is due
+    (:func:`_trace_companion`); its seconds, companion's included, returned.
+    ``cost`` gets the launch alone, and whether it recorded: a time limit
+    alone traces no companion, and plans its launches from these."""
+    guides = passes.count < passes.guide_spp
     begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
     count = passes.count
     with kernel_seconds() as spent:
-        _trace_pass(passes, tracer, xy, spp, launch, half)
+        _trace_pass(passes, tracer, xy, spp, launch, half, guides)
     seconds = time.perf_counter() - begin
     # the spp the sampler took (a square for some); a recording call traces the
     # kernels, which run, or compile, when read back after it
     cost.add(passes.count - count, seconds, recordings() > recorded, spent.compile,
              spent.execute, recording_s=recording_seconds() - recording)
-    return seconds
+    if half is None and passes.companion is not None:
+        _trace_companion(passes, tracer, xy, spp, launch, guides)
+    return time.perf_counter() - begin
 
 
 def run_passes(tracer, width: int, height: int, *, quality: str,
@@ -725,6 +737,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # take a launch of their own, over every other row of the strips
     if estimates and bakes:
         passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
+    # (``cost`` holds launches without their companion: one traces its share of the pixels more)
+    with_companion = 1.0 + (0.0 if passes.companion is None else len(passes.companion) / n)
     as_rounds = estimates or bakes
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else
@@ -779,7 +793,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         # without estimates nothing is learnt from rounds: once a launch was
         # replayed (here or by an earlier render: the first, if it recorded,
         # is not a launch's cost), the passes fill the time at once
-        round_s = cost(next_size)
+        round_s = with_companion * cost(next_size)
         measured = passes.count >= FIRST_ROUND or cost.replayed
         if deadline is not None and ((not estimates and measured) or time.perf_counter()
                                      + ROUND_SAFETY * round_s + oidn_s > deadline):
@@ -789,7 +803,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
             _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
                   cost, max_spp, launch, halves=as_rounds, exact=exact,
-                  least=2 if estimates else 1)
+                  least=2 if estimates else 1, companion=with_companion)
             break
         round_size = next_size
         if not bakes and target is not None and progress.history:

@@ -815,6 +815,20 @@ def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
     assert passes.half_counts == [2, 2] and passes.count == 4
 
 
+def test_a_launch_s_cost_leaves_out_its_companion(timed_tracer):
+    # a time limit alone traces no companion: the launches it plans from are the passes' own
+    from mitsuba_mrt.renderer import progressive
+
+    Tracer, launched, clock = timed_tracer
+    xy = np.zeros((4, 2), dtype=np.int64)
+    passes, cost = progressive.Passes(np.arange(4)), progressive.LaunchCost()
+    passes.companion = np.array([0, 2])
+    seconds = progressive._launch(passes, Tracer(2), xy, 2, 0, None, cost)
+    assert launched == [2, 2] and seconds == 6.0  # the launch, then its companion
+    assert [launch[:3] for launch in cost.launches] == [(2, 3.0, False)]
+    assert passes.half_counts == [2, 2]
+
+
 def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_has(
         timed_tracer):
     from mitsuba_mrt.renderer import progressive
