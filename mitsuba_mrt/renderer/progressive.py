@@ -701,8 +701,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.  Under a deadline, a
     sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
-    launches the spp launched before where they fit, as rounds (both halves,
-    the guides throughout).  ``surfaces`` (each
+    launches the spp launched before where they fit, as the default rounds
+    launched them (a launch in one half, the guides throughout).  ``surfaces`` (each
     pixel's shape index, and per shape index whether it is a textured
     diffuse surface: :func:`~.scene_query.textured_diffuse_shapes`) lets
     the last OIDN call denoise the textured pixels as their shading
@@ -728,9 +728,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # half, and leave the last OIDN call its expected time; the first launch
     # is as large as earlier renders' launches say fits, else the cheapest.
     # Under a deadline a sampler that compiles kernels per spp keeps the
-    # default rounds' layout (both halves, the guides throughout), so that
-    # the spp launched before replay their kernels (a new spp's compilation
-    # is its LaunchCost.record_s)
+    # default rounds' layout (all of a launch in one half, as beside their
+    # companion; the guides throughout), so that the spp launched before
+    # replay their kernels (a new spp's compilation is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not (deadline is not None and target_error is None)
     # a sampler that bakes its spp stratifies a pixel's samples: the estimates
@@ -739,7 +739,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
     # (``cost`` holds launches without their companion: one traces its share of the pixels more)
     with_companion = 1.0 + (0.0 if passes.companion is None else len(passes.companion) / n)
-    as_rounds = estimates or bakes
+    as_rounds = estimates
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else
              lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))

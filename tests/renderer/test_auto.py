@@ -854,8 +854,9 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     # 30 / 1.15 s holds 9 spp launched before (10 s), not a new 25; then 20 s left
     # hold 9 again, 10 s 4 spp (5 s), and 5 s none
     assert launched == [9, 9, 4] and clock[0] <= 30.0
-    # each as the default rounds were launched: both halves, the guides throughout
-    assert kinds == [(True, True)] * 3
+    # each as the default rounds' launches were (their estimates have a companion
+    # launch of their own): no odd samples apart, the guides throughout
+    assert kinds == [(True, False)] * 3
     # where only 1 spp was launched before, the time fills with 1-spp launches
     launched.clear()
     clock[0] = 0.0
