@@ -10,6 +10,11 @@ limit and the plan it chose.  Kernels come from Dr.Jit's disk cache and
 modules from Python's bytecode cache, as for a user (run it twice after a
 change: the first run fills both); the process has no earlier render to
 learn OIDN's or a pass's cost from.
+
+With ``--cold-cache`` every limit's process gets an empty Dr.Jit kernel
+cache (its own ``HOME``) and compiles every kernel it uses: what a first run
+on a new machine pays.  The full renders keep the cache, so that the limits
+are the same shares of a full render's usual time.
 """
 
 import argparse
@@ -18,6 +23,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,13 +47,16 @@ else:
 """
 
 
-def _child(path: Path, limit: str, res: int) -> dict:
+def _child(path: Path, limit: str, res: int, cold: bool = False) -> dict:
     env = dict(os.environ)
     # as a user's Python: the package's modules compiled once, their bytecode
     # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit, str(res)],
-                         env=env, capture_output=True, text=True, check=True)
+    with tempfile.TemporaryDirectory() as home:
+        if cold:  # (Dr.Jit keeps its kernel cache under HOME)
+            env["HOME"] = home
+        out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit, str(res)],
+                             env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -55,12 +64,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--res", type=int, default=256)
+    parser.add_argument("--cold-cache", action="store_true",
+                        help="each limit's process with an empty kernel cache")
     args = parser.parse_args()
     for name in args.scenes:
         path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
         full = statistics.median(_child(path, "full", args.res)["seconds"] for _ in range(3))
         for share in LIMITS:
-            run = _child(path, str(share * full), args.res)
+            run = _child(path, str(share * full), args.res, args.cold_cache)
             print(f"{name}: full {full:.3f} s; limit {share}: "
                   f"{run['seconds'] / (share * full):.2f}x the limit ({run['chose']})", flush=True)
 
