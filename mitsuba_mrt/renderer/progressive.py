@@ -739,7 +739,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
     # (``cost`` holds launches without their companion: one traces its share of the pixels more)
     with_companion = 1.0 + (0.0 if passes.companion is None else len(passes.companion) / n)
-    as_rounds = estimates
+    as_rounds = estimates  # (a round's two halves serve the estimates alone)
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else
              lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))
