@@ -1,7 +1,7 @@
 """``auto --time-limit`` as a user's first render: each render in a fresh process.
 
     python examples/fresh_time_limit.py checker_border cornell crop_rgba envmap_objects \
-        instanced materials room spot_textures two_sensors [--res 512]
+        instanced materials room spot_textures two_sensors [--res 512] [--cold-cache]
 
 Per gallery scene at ``--res`` a side (256 by default): the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
