@@ -22,8 +22,10 @@ from ..types import SeedStream, SparseTrace
 from .develop import sample_variance
 from .replay import recordings
 
-#: The most 1-spp launches a preview's grid pools.
-PREVIEW_MAX_SPP = 4
+#: The most 1-spp launches a preview's grid pools: a bound the time rarely
+#: leaves room for (a preview is taken where one pass of every pixel does not
+#: fit, and this many launches of a tenth of the pixels trace more than one).
+PREVIEW_MAX_SPP = 16
 
 
 def pooled(traces: list[SparseTrace]) -> SparseTrace:
