@@ -66,8 +66,8 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
 
 _lock = threading.Lock()
 # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter;
-# "seconds": quality -> {pixels: seconds of the last call at that size, its
-# filter's set-up left out}
+# "recent": quality -> {pixels: seconds of the last RECENT_CALLS calls at that
+# size, each its filter's set-up left out}
 _state: dict = {}
 
 
@@ -106,7 +106,8 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
     else a line through the last calls' times on the two largest images (a
     fixed cost and one per pixel), or the one image's time scaled to
     ``pixels``."""
-    table = _state.get("seconds", {}).get(quality)
+    table = {size: _typical(calls)
+             for size, calls in _state.get("recent", {}).get(quality, {}).items()}
     if not table:
         return None
     if pixels in table:
@@ -139,7 +140,7 @@ def expected_seconds(pixels: int, quality: str) -> float:
     :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
     (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
     seconds = denoise_seconds(pixels, quality)
-    if pixels in _state.get("seconds", {}).get(quality, {}):
+    if pixels in _state.get("recent", {}).get(quality, {}):
         return seconds
     if seconds is None:
         import drjit as dr
@@ -246,12 +247,15 @@ def _record(quality: str, shape: tuple, seconds: float, first: bool = False) -> 
     :data:`FIRST_CALL_SHARE` (it made the filter's buffers)."""
     if first:
         seconds /= 1.0 + FIRST_CALL_SHARE
-    pixels = shape[0] * shape[1]
-    recent = _state.setdefault("recent", {}).setdefault((quality, pixels), [])
-    recent.append(seconds)
-    del recent[:-RECENT_CALLS]
-    typical = sorted(recent)[(len(recent) - 1) // 2]
-    _state.setdefault("seconds", {}).setdefault(quality, {})[pixels] = typical
+    calls = _state.setdefault("recent", {}).setdefault(quality, {}).setdefault(
+        shape[0] * shape[1], [])
+    calls.append(seconds)
+    del calls[:-RECENT_CALLS]
+
+
+def _typical(calls: list) -> float:
+    """The median of ``calls``' seconds, the lower of two."""
+    return sorted(calls)[(len(calls) - 1) // 2]
 
 
 def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | None,

@@ -82,7 +82,7 @@ def test_its_cost_is_known_after_a_call(oidn):
     denoise_image(image, *_guides(image.shape), quality="fast")
     assert denoise.denoise_seconds(64 * 64, "fast") == measured != large
     # two sizes: a fixed cost and one per pixel, through both
-    denoise._state["seconds"]["fast"] = {100: 1.0, 400: 2.5}
+    denoise._state["recent"]["fast"] = {100: [1.0], 400: [2.5]}
     assert denoise.denoise_seconds(1000, "fast") == pytest.approx(2.5 + 0.005 * 600)
     # a size not called yet: its first call makes the filter's buffers
     assert denoise.expected_seconds(1000, "fast") == pytest.approx(
