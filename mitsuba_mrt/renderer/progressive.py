@@ -739,7 +739,6 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
     # (``cost`` holds launches without their companion: one traces its share of the pixels more)
     with_companion = 1.0 + (0.0 if passes.companion is None else len(passes.companion) / n)
-    as_rounds = estimates  # (a round's two halves serve the estimates alone)
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else
              lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))
@@ -752,7 +751,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                                                                           round_size)
     while True:
         begin = time.perf_counter()
-        launch = _trace_round(passes, tracer, xy, round_size, launch, as_rounds, cost)
+        # (a round's two halves serve the estimates alone)
+        launch = _trace_round(passes, tracer, xy, round_size, launch, estimates, cost)
         if surfaces is not None and denoise and passes.textured is None \
                 and passes.count == passes.guides:  # the first round: the textured pixels
             passes.textured = textured_pixels(surfaces[0], passes.guide()[0], surfaces[1])
@@ -802,7 +802,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             left = max(deadline - time.perf_counter() - oidn_s, 0.0)
             final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
             _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
-                  cost, max_spp, launch, halves=as_rounds, exact=exact,
+                  cost, max_spp, launch, halves=estimates, exact=exact,
                   least=2 if estimates else 1, companion=with_companion)
             break
         round_size = next_size
