@@ -195,14 +195,14 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     spp = _check_spp(spp) or int(sensor.sampler().sample_count())
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
-    plan, pattern, grid, check, id_pass = None, None, None, False, None
+    plan, pattern, grid, check, id_pass, preview_key = None, None, None, False, None, None
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
             pattern = grid_pattern(width, height, params.sample_fraction)
             outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
             plan, grid, check = outcome.plan, outcome.grid, outcome.check
-            id_pass = outcome.id_pass
+            id_pass, preview_key = outcome.id_pass, outcome.preview_key
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
         choice = plan.choice
@@ -225,7 +225,11 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
         tracer = replace(tracer, spp=choice.spp, id_pass=id_pass)
     if pattern is None:  # (a plan's pilot has made it already)
         pattern = grid_pattern(width, height, params.sample_fraction)
-    return _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
+    begin = time.perf_counter()
+    result = _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
+    if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
+        auto.note_preview_after(preview_key, time.perf_counter() - begin)
+    return result
 
 
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,

@@ -210,6 +210,14 @@ _probe_recording_s: dict = {}
 #: cannot end within a time limit, the next render of the scene is not
 #: probed for it (:func:`_mrt_within`).
 _probe_execute: dict = {}
+#: The seconds a preview's stages after its grid took (OIDN on the grid, the
+#: reconstruction, the finish), the last :data:`PREVIEW_AFTER_CALLS` per the
+#: same keys (the last :data:`KEPT_COSTS`): the next preview of the scene
+#: leaves their median for them (:func:`_filled_preview`), where the first
+#: leaves :data:`FINISH_PER_PIXEL`'s bound, which holds a fresh process's
+#: first uses.
+_preview_after_s: dict = {}
+PREVIEW_AFTER_CALLS = 3
 
 
 @dataclass
@@ -217,7 +225,8 @@ class AutoOutcome:
     """``auto``'s plan, and the image when the passes made it (``grid``: the
     preview's grid, where tracing it told the plan; ``check``: the plan's
     MRT image is to be checked, :func:`keeps`; ``id_pass``: the image's id
-    pass, where the plan traced it)."""
+    pass, where the plan traced it; ``preview_key``: a preview's key, under
+    which :func:`note_preview_after` keeps what its later stages take)."""
 
     plan: Plan
     image: np.ndarray | None = None
@@ -226,6 +235,7 @@ class AutoOutcome:
     grid: SparseTrace | None = None
     check: bool = False
     id_pass: SparseTrace | None = None
+    preview_key: tuple | None = None
 
 
 def keeps(held: HeldOut) -> bool:
@@ -304,7 +314,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                                                   notes, probed, traced)
         if outcome is not None:
             return _filled_preview(outcome, pattern, tracer, params, started,
-                                   recordings() > recorded_before)
+                                   recordings() > recorded_before, key)
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, traced.shape_index())
     recorded = recordings()
@@ -475,22 +485,35 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
 
 
 def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params: MRTParams,
-                    started: float, recorded: bool) -> AutoOutcome:
+                    started: float, recorded: bool, key: tuple) -> AutoOutcome:
     """``outcome``, the preview, its grid pooled from as many 1-spp launches
     as end before the limit (its :data:`TIME_MARGIN`) less what the stages
-    after the grid are expected to take (:data:`FINISH_PER_PIXEL`; before
-    OIDN's first call at the preview's quality, that call's expected time on
-    top, which holds its set-up): :func:`.preview.preview_grid`.  None more
-    where the render has ``recorded`` kernels: Dr.Jit records a layout's
-    first two calls, so the next launch may record too."""
-    quality = preset(params.denoise_quality)
-    after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
-        expected_seconds(pattern.count, quality)
-        if denoise_seconds(pattern.count, quality) is None else 0.0)
+    after the grid are expected to take: the median of the last previews'
+    of ``key`` (:data:`_preview_after_s`), else :data:`FINISH_PER_PIXEL`'s
+    (before OIDN's first call at the preview's quality, that call's expected
+    time on top, which holds its set-up): :func:`.preview.preview_grid`.
+    None more where the render has ``recorded`` kernels: Dr.Jit records a
+    layout's first two calls, so the next launch may record too."""
+    kept = _preview_after_s.get(key)
+    if kept:
+        after = sorted(kept)[(len(kept) - 1) // 2]
+    else:
+        quality = preset(params.denoise_quality)
+        after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
+            expected_seconds(pattern.count, quality)
+            if denoise_seconds(pattern.count, quality) is None else 0.0)
     until = started if recorded else started + TIME_MARGIN * params.time_limit - after
     grid = preview_grid(outcome.grid, pattern, tracer, until)
     outcome.plan.choice = replace(outcome.plan.choice, spp=grid.spp)
-    return replace(outcome, grid=grid)
+    return replace(outcome, grid=grid, preview_key=key)
+
+
+def note_preview_after(key: tuple, seconds: float) -> None:
+    """Keep what the stages after a preview's grid took (``seconds``) for
+    the next preview of ``key`` (:data:`_preview_after_s`)."""
+    calls = _keep(_preview_after_s, key, _preview_after_s.get(key, []))
+    calls.append(seconds)
+    del calls[:-PREVIEW_AFTER_CALLS]
 
 
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:

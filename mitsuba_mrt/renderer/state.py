@@ -5,7 +5,8 @@ made: the trace's recorded kernels and the Mitsuba objects held for them,
 a filter or integrator made once per variant, the tables of the pixel
 filters, the OIDN device and filters, interpolation weights, and what the
 last renders took (OIDN's calls, ``auto``'s first round under a time
-limit, the passes' launches, the grid probe's recording).  None of them
+limit, the passes' launches, the grid probe's recording, a preview's
+stages after its grid).  None of them
 changes a result, except that ``auto`` plans a time limit from those
 times.  :func:`clear_caches` drops them all, to free what they hold or to
 time a first call again; docs/ARCHITECTURE.md (Process-wide state) lists
@@ -29,6 +30,7 @@ def clear_caches() -> None:
     auto._launch_costs.clear()
     auto._probe_recording_s.clear()
     auto._probe_execute.clear()
+    auto._preview_after_s.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()
     pixel_filter._TABLES.clear()

@@ -16,6 +16,7 @@ from mitsuba_mrt import MRTError, MRTParams
 from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
 from mitsuba_mrt.renderer import auto, pilot
+from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
 
 from helpers import SCENES
 from helpers import ball_scene_xml as scene_xml
@@ -942,3 +943,20 @@ def test_a_stratified_pilot_reference_s_noise_is_its_halves_difference():
     # the square of the halves' difference is twice a half's variance
     assert stratified.noise_b == pytest.approx(np.full((2, 3), 0.0002))
     assert stratified.noise_mean == pytest.approx(np.full((2, 3), 0.0001))
+
+
+def test_a_preview_leaves_its_later_stages_what_the_last_previews_took(scene, monkeypatch):
+    monkeypatch.setattr(auto, "_preview_after_s", {})
+    monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
+    for _ in range(3):  # (Dr.Jit records a layout's first calls: no launch pooled after)
+        mitsuba_mrt.render(scene, time_limit=10.0)
+    (key,) = auto._preview_after_s
+    auto._preview_after_s.clear()
+    first = mitsuba_mrt.render(scene, time_limit=10.0)
+    # nothing kept: the bound per pixel, far below a 10-s limit on this image
+    assert first.auto.reason == auto.PREVIEW_REASON and first.spp == PREVIEW_MAX_SPP
+    (took,) = auto._preview_after_s[key]
+    assert 0.0 < took < first.timings.total - first.timings.trace
+    # previews whose stages after the grid filled the limit: no launch pooled
+    auto._preview_after_s[key] = [9.5, 9.6, 0.0]
+    assert mitsuba_mrt.render(scene, time_limit=10.0).spp == 1
