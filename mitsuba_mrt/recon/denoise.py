@@ -27,6 +27,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..errors import MRTError
+from ..runtime.recent import note, typical
 from .compose import safe_albedo
 
 #: OIDN's quality presets, fastest first.
@@ -106,7 +107,7 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
     else a line through the last calls' times on the two largest images (a
     fixed cost and one per pixel), or the one image's time scaled to
     ``pixels``."""
-    table = {size: _typical(calls)
+    table = {size: typical(calls)
              for size, calls in _state.get("recent", {}).get(quality, {}).items()}
     if not table:
         return None
@@ -247,15 +248,8 @@ def _record(quality: str, shape: tuple, seconds: float, first: bool = False) -> 
     :data:`FIRST_CALL_SHARE` (it made the filter's buffers)."""
     if first:
         seconds /= 1.0 + FIRST_CALL_SHARE
-    calls = _state.setdefault("recent", {}).setdefault(quality, {}).setdefault(
-        shape[0] * shape[1], [])
-    calls.append(seconds)
-    del calls[:-RECENT_CALLS]
-
-
-def _typical(calls: list) -> float:
-    """The median of ``calls``' seconds, the lower of two."""
-    return sorted(calls)[(len(calls) - 1) // 2]
+    note(_state.setdefault("recent", {}).setdefault(quality, {}).setdefault(
+        shape[0] * shape[1], []), seconds, RECENT_CALLS)
 
 
 def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | None,

@@ -56,6 +56,7 @@ from ..recon.denoise import denoise_seconds, expected_seconds, oidn_available, p
 from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern, every_pixel
 from ..runtime.jit import kernel_seconds
+from ..runtime.recent import note, typical
 from ..types import MRTParams, SeedStream, SparseTrace
 from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
@@ -496,7 +497,7 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
     layout's first two calls, so the next launch may record too."""
     kept = _preview_after_s.get(key)
     if kept:
-        after = sorted(kept)[(len(kept) - 1) // 2]
+        after = typical(kept)
     else:
         quality = preset(params.denoise_quality)
         after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
@@ -511,9 +512,8 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
 def note_preview_after(key: tuple, seconds: float) -> None:
     """Keep what the stages after a preview's grid took (``seconds``) for
     the next preview of ``key`` (:data:`_preview_after_s`)."""
-    calls = _keep(_preview_after_s, key, _preview_after_s.get(key, []))
-    calls.append(seconds)
-    del calls[:-PREVIEW_AFTER_CALLS]
+    note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
+         PREVIEW_AFTER_CALLS)
 
 
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
