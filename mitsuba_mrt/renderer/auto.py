@@ -522,9 +522,11 @@ def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
     launched for ``key`` before (they replay) or the probe itself recorded
     (its time holds a recording); else what the probe's recording took
     beyond its replays (:data:`_probe_recording_s`), kept from the render
-    whose probe recorded."""
+    whose probe recorded, less what compiling kernels took of it: a kernel
+    compiled once is on disk for every later process, so a compilation kept
+    would hold every later render of the process to previews."""
     if probed.recorded:
-        _keep(_probe_recording_s, key, probed.host)
+        _keep(_probe_recording_s, key, probed.host - probed.compile)
         return 0.0
     launches = _launch_costs.get(key)
     if launches is not None and launches.launches:
@@ -586,14 +588,16 @@ def _id_pass(tracer, width: int, height: int) -> SparseTrace:
 class _Probe(NamedTuple):
     """The grid probe (:func:`_grid_probe`): the preview's grid trace, the
     seconds a pass over every pixel is expected to take, the trace's kernels'
-    run time, what it took beyond them, and whether it recorded its kernels
-    (a process's first trace of the scene)."""
+    run time, what it took beyond them, whether it recorded its kernels (a
+    process's first trace of the scene) and what compiling those not in
+    Dr.Jit's caches took of ``host`` (once per machine, not per process)."""
 
     grid: SparseTrace
     pass_s: float
     execute: float
     host: float
     recorded: bool
+    compile: float = 0.0
 
 
 def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
@@ -609,7 +613,7 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
     host = max(time.perf_counter() - begin - spent.execute, 0.0)
     pixels = pattern.width * pattern.height
     return _Probe(grid, host + PASS_OVER_GRID * spent.execute * pixels / pattern.count,
-                  spent.execute, host, recordings() > recorded)
+                  spent.execute, host, recordings() > recorded, min(spent.compile, host))
 
 
 def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,

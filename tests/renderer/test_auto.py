@@ -421,14 +421,17 @@ def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_laun
     monkeypatch.setattr(auto, "_launch_costs", {})
     monkeypatch.setattr(auto, "_probe_recording_s", {})
 
-    def probe(recorded, host):
-        return auto._Probe(None, host + 0.01, 0.005, host, recorded)
+    def probe(recorded, host, compile=0.0):
+        return auto._Probe(None, host + 0.01, 0.005, host, recorded, compile)
     key = ("scene", "sensor", "integrator", 256 * 256)
     # a recording probe's own time holds a recording: nothing to add, its time is kept
     assert auto._passes_recording_s(key, probe(True, 0.030)) == 0.0
     # a replayed probe's does not: the passes' first launch adds what recording took more
     assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
     assert auto._passes_recording_s(("other",) + key[1:], probe(False, 0.004)) == 0.0
+    # a recording that compiled a kernel keeps its time less the compilation
+    assert auto._passes_recording_s(key, probe(True, 0.330, compile=0.300)) == 0.0
+    assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
     tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"))
     auto._kept_cost(key, tracer).add(1, 0.02, recorded=True)
     assert auto._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
