@@ -293,7 +293,10 @@ def textured_pixels(shape_index: np.ndarray, albedo: np.ndarray,
         Each pixel's shape (1-based, 0: none), as the trace gives it.
     albedo : ndarray, shape (n, 3)
     diffuse : ndarray of bool, shape (shapes + 1,)
-        Per shape index, whether its BSDF is purely diffuse (entry 0 unused).
+        Per shape index, whether its BSDF is purely diffuse with a reflectance
+        that varies (the renderer's ``textured_diffuse_shapes``; entry 0
+        unused): a one-colour surface's edge pixels disagree too, as they mix
+        two surfaces' albedos.
 
     Examples
     --------
@@ -330,21 +333,16 @@ def denoise_grid(radiance: np.ndarray, albedo: np.ndarray | None = None,
     ``quality``: default :data:`GRID_QUALITY`.  ``textured`` (rows, columns)
     marks the pixels on textured diffuse surfaces (:func:`textured_pixels`):
     theirs is the denoised shading, ``radiance / albedo`` denoised with a
-    flat albedo guide, times their albedo (a second OIDN call, only where
-    some pixel is marked).  ``exact`` (rows, columns) marks the pixels whose
+    flat albedo guide, times their albedo, in the same OIDN call as the
+    others (:func:`denoise_shading`).  ``exact`` (rows, columns) marks the pixels whose
     samples all agreed (a constant background, an emitter seen directly):
     they keep their values, which a denoiser can only blur.
     """
     quality = quality or GRID_QUALITY
-    out = denoise_image(radiance, albedo, normal, quality)
     if textured is not None and albedo is not None and np.any(textured):
-        textured = np.asarray(textured, dtype=bool)
-        safe = safe_albedo(albedo)
-        surface = (np.asarray(albedo) > 0).any(axis=-1) | textured
-        flat = np.repeat(surface[..., None].astype(np.float64), 3, axis=-1)
-        shading = denoise_image(np.asarray(radiance, dtype=np.float64) / safe, flat, normal,
-                                quality)
-        out = np.where(textured[..., None], shading * safe, out)
+        out = denoise_shading(radiance, albedo, normal, textured, quality)
+    else:
+        out = denoise_image(radiance, albedo, normal, quality)
     if exact is not None:
         out = np.where(np.asarray(exact, dtype=bool)[..., None], radiance, out)
     return out

@@ -19,7 +19,7 @@ from ..modes import OUTPUT_DENOISED_MODES, reconstruct
 from ..recon.denoise import denoise_grid, denoise_image, preset, textured_pixels
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer
-from .scene_query import diffuse_shapes
+from .scene_query import textured_diffuse_shapes
 
 
 @dataclass
@@ -63,7 +63,7 @@ def denoise_stage(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
         return trace
     grid = pattern.grid_shape + (3,)
     normal = None if trace.normal is None else trace.normal.reshape(grid)
-    textured = textured_pixels(trace.shape_index, trace.albedo, diffuse_shapes(scene))
+    textured = textured_pixels(trace.shape_index, trace.albedo, textured_diffuse_shapes(scene))
     exact = None
     if trace.variance is not None and trace.spp > 1:
         exact = ((trace.variance == 0.0).all(axis=1)

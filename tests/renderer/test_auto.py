@@ -474,6 +474,33 @@ def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
     assert not mitsuba_mrt.render(plain, noise_threshold=0.05).auto.choice.shading
 
 
+def test_the_grid_marks_as_textured_only_pixels_of_surfaces_with_a_texture(variant, monkeypatch):
+    # a plain surface's edge pixels mix two albedos; marked, their shading would
+    # go through the grid's one OIDN call beside the others' radiance
+    from mitsuba_mrt.recon.sampling import grid_pattern
+    from mitsuba_mrt.renderer import pipeline
+    from mitsuba_mrt.renderer.scene_query import ordered_shapes
+    from mitsuba_mrt.types import SparseTrace
+
+    marked = []
+    monkeypatch.setattr(pipeline, "denoise_grid",
+                        lambda radiance, *a, textured=None, **k: marked.append(textured) or radiance)
+    params = MRTParams(denoise="oidn")
+    for name, shape in (("cornell", "cbox_white"), ("spot_textures", "floor")):
+        scene = mitsuba_mrt.load_scene(ROOT / f"scenes_xml/gallery/{name}.xml", res=64)
+        index = 1 + [s.id() for s in ordered_shapes(scene)].index(shape)
+        pattern = grid_pattern(64, 64, 0.25)
+        n = pattern.count
+        albedo = np.repeat(np.where(np.arange(n) % 2, 0.05, 0.8)[:, None], 3, axis=1)
+        trace = SparseTrace(radiance=albedo.copy(), albedo=albedo,
+                            shape_index=np.full(n, index, dtype=np.int64),
+                            visible_lights=np.zeros(n, np.uint32), num_lights=0, spp=4,
+                            seconds=0.0, shadow_rays=False)
+        pipeline.denoise_stage(scene, pattern, trace, params)
+    plain, textured = marked
+    assert not plain.any() and textured.all()
+
+
 def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_light(variant):
     from mitsuba_mrt.renderer.scene_query import transmits
 
