@@ -334,9 +334,9 @@ def denoise_grid(radiance: np.ndarray, albedo: np.ndarray | None = None,
     marks the pixels on textured diffuse surfaces (:func:`textured_pixels`):
     theirs is the denoised shading, ``radiance / albedo`` denoised with a
     flat albedo guide, times their albedo, in the same OIDN call as the
-    others (:func:`denoise_shading`).  ``exact`` (rows, columns) marks the pixels whose
-    samples all agreed (a constant background, an emitter seen directly):
-    they keep their values, which a denoiser can only blur.
+    others (:func:`denoise_shading`).  ``exact`` (rows, columns) marks the
+    pixels whose samples all agreed (a constant background, an emitter seen
+    directly): they keep their values, which a denoiser can only blur.
     """
     quality = quality or GRID_QUALITY
     if textured is not None and albedo is not None and np.any(textured):

@@ -474,7 +474,8 @@ def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
     assert not mitsuba_mrt.render(plain, noise_threshold=0.05).auto.choice.shading
 
 
-def test_the_grid_marks_as_textured_only_pixels_of_surfaces_with_a_texture(variant, monkeypatch):
+def test_the_grid_marks_as_textured_only_pixels_of_surfaces_with_a_texture(variant,
+                                                                           monkeypatch):
     # a plain surface's edge pixels mix two albedos; marked, their shading would
     # go through the grid's one OIDN call beside the others' radiance
     from mitsuba_mrt.recon.sampling import grid_pattern
