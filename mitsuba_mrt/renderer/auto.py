@@ -18,9 +18,11 @@
    transmits light and none is textured.  The image is kept where its
    held-out check (:mod:`.held_out`, :func:`keeps`) finds it near a full
    render's quality, else the passes render the image after it.  Under a
-   time limit (OIDN installed, at least :data:`HOME_MIN_SPP` spp) the same
-   :data:`HOME` plan, unchecked, where the grid probe says it ends within
-   the limit (:func:`_mrt_within`).
+   time limit (OIDN installed, at least :data:`HOME_MIN_SPP` spp) such a
+   plan, unchecked, where the process's earlier renders of the scene kept it
+   and took less than the limit (:func:`_measured_within`), else the
+   :data:`HOME` plan where the grid probe says it ends within the limit
+   (:func:`_mrt_within`).
 3. Under a time limit too short for one pass and OIDN on the whole image
    (judged from the first round of an earlier time-limited render of the
    scene in this process, else from the preview's own grid, traced first):
@@ -219,6 +221,16 @@ _probe_execute: dict = {}
 #: first uses.
 _preview_after_s: dict = {}
 PREVIEW_AFTER_CALLS = 3
+#: What an MRT plan of the default target took where its held-out check kept
+#: its image (the check's own time left out), the last :data:`PLAN_CALLS`
+#: renders per :func:`plan_key` (the last :data:`KEPT_COSTS` keys), with the
+#: plan: under a time limit that plan is taken again, unchecked, where their
+#: median ends within the limit (:func:`_measured_within`).
+_plan_s: dict = {}
+PLAN_CALLS = 3
+#: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
+#: then the seconds it took).
+MEASURED_REASON = "{}; took {:.3g} s in this process's renders of the scene, within the time limit"
 
 
 @dataclass
@@ -306,6 +318,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
+        outcome = _measured_within(plan_key(scene, tracer, params, width * height), started,
+                                   limit, notes)
+        if outcome is not None:
+            return outcome
         outcome, traced, probed = _mrt_within(scene, pattern, tracer, params, started, notes,
                                               key)
         if outcome is not None:
@@ -514,6 +530,41 @@ def note_preview_after(key: tuple, seconds: float) -> None:
     the next preview of ``key`` (:data:`_preview_after_s`)."""
     note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
          PREVIEW_AFTER_CALLS)
+
+
+def plan_key(scene: mi.Scene, tracer, params: MRTParams, pixels: int) -> tuple:
+    """The key of :data:`_plan_s`: the traced objects, the image's pixel
+    count, the spp and the parameters but the time limit and quality target."""
+    return (token((scene, tracer.sensor, tracer.integrator)), pixels, tracer.spp,
+            replace(params, time_limit=None, noise_threshold=None))
+
+
+def note_plan_s(key: tuple, plan: Plan, seconds: float) -> None:
+    """Keep ``seconds``, what the render of ``plan`` (an MRT plan of the
+    default target, kept by its check) took for ``key`` (:func:`plan_key`),
+    for a later time limit (:func:`_measured_within`)."""
+    kept = _plan_s.get(key)
+    calls = kept[1] if kept is not None and kept[0].name == plan.choice.name else []
+    note(calls, seconds, PLAN_CALLS)
+    _keep(_plan_s, key, (plan.choice, calls, plan.reason))
+
+
+def _measured_within(key: tuple, started: float, limit: float,
+                     notes: list) -> AutoOutcome | None:
+    """Under a time limit: the MRT plan of the default target that renders
+    of ``key`` (:func:`plan_key`) in this process took (:data:`_plan_s`),
+    where the median of their seconds ends within :data:`TIME_MARGIN` of the
+    limit, unchecked (its check kept the same plan's image); else None."""
+    kept = _plan_s.get(key)
+    if kept is None:
+        return None
+    choice, calls, reason = kept
+    seconds = typical(calls)
+    if time.perf_counter() + seconds > started + TIME_MARGIN * limit:
+        return None
+    plan = Plan(replace(choice, seconds=seconds), MEASURED_REASON.format(reason, seconds),
+                time_limit=limit, notes=notes, pilot_s=time.perf_counter() - started)
+    return AutoOutcome(plan)
 
 
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:

@@ -6,7 +6,7 @@ a filter or integrator made once per variant, the tables of the pixel
 filters, the OIDN device and filters, interpolation weights, and what the
 last renders took (OIDN's calls, ``auto``'s first round under a time
 limit, the passes' launches, the grid probe's recording, a preview's
-stages after its grid).  None of them
+stages after its grid, the checked MRT plans).  None of them
 changes a result, except that ``auto`` plans a time limit from those
 times.  :func:`clear_caches` drops them all, to free what they hold or to
 time a first call again; docs/ARCHITECTURE.md (Process-wide state) lists
@@ -31,6 +31,7 @@ def clear_caches() -> None:
     auto._probe_recording_s.clear()
     auto._probe_execute.clear()
     auto._preview_after_s.clear()
+    auto._plan_s.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()
     pixel_filter._TABLES.clear()
