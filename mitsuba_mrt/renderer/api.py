@@ -246,8 +246,9 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
     if auto.keeps(held):
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
-        auto.note_plan_s(auto.plan_key(scene, tracer, params, pattern.width * pattern.height),
-                         plan, result.timings.total - held.seconds)
+        key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
+        auto.note_plan_s(key + auto.plan_key(tracer, params), plan,
+                         result.timings.total - held.seconds)
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

@@ -223,9 +223,10 @@ _preview_after_s: dict = {}
 PREVIEW_AFTER_CALLS = 3
 #: What an MRT plan of the default target took where its held-out check kept
 #: its image (the check's own time left out), the last :data:`PLAN_CALLS`
-#: renders per :func:`plan_key` (the last :data:`KEPT_COSTS` keys), with the
-#: plan: under a time limit that plan is taken again, unchecked, where their
-#: median ends within the limit (:func:`_measured_within`).
+#: renders per :func:`scene_key` and :func:`plan_key` (the last
+#: :data:`KEPT_COSTS` keys), with the plan: under a time limit that plan is
+#: taken again, unchecked, where their median ends within the limit
+#: (:func:`_measured_within`).
 _plan_s: dict = {}
 PLAN_CALLS = 3
 #: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
@@ -314,12 +315,11 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             return outcome
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
-    key = (token((scene, tracer.sensor, tracer.integrator)), width * height)
+    key = scene_key(scene, tracer, width * height)
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        outcome = _measured_within(plan_key(scene, tracer, params, width * height), started,
-                                   limit, notes)
+        outcome = _measured_within(key + plan_key(tracer, params), started, limit, notes)
         if outcome is not None:
             return outcome
         outcome, traced, probed = _mrt_within(scene, pattern, tracer, params, started, notes,
@@ -532,17 +532,22 @@ def note_preview_after(key: tuple, seconds: float) -> None:
          PREVIEW_AFTER_CALLS)
 
 
-def plan_key(scene: mi.Scene, tracer, params: MRTParams, pixels: int) -> tuple:
-    """The key of :data:`_plan_s`: the traced objects, the image's pixel
-    count, the spp and the parameters but the time limit and quality target."""
-    return (token((scene, tracer.sensor, tracer.integrator)), pixels, tracer.spp,
-            replace(params, time_limit=None, noise_threshold=None))
+def scene_key(scene: mi.Scene, tracer, pixels: int) -> tuple:
+    """The key of what earlier renders took (:data:`_launch_costs` and the
+    other tables of the module): the traced objects and the image's pixel count."""
+    return token((scene, tracer.sensor, tracer.integrator)), pixels
+
+
+def plan_key(tracer, params: MRTParams) -> tuple:
+    """What :data:`_plan_s`'s key adds to :func:`scene_key`'s: the spp and the
+    parameters but the time limit and quality target."""
+    return tracer.spp, replace(params, time_limit=None, noise_threshold=None)
 
 
 def note_plan_s(key: tuple, plan: Plan, seconds: float) -> None:
     """Keep ``seconds``, what the render of ``plan`` (an MRT plan of the
-    default target, kept by its check) took for ``key`` (:func:`plan_key`),
-    for a later time limit (:func:`_measured_within`)."""
+    default target, kept by its check) took for ``key`` (:func:`scene_key`
+    and :func:`plan_key`), for a later time limit (:func:`_measured_within`)."""
     kept = _plan_s.get(key)
     calls = kept[1] if kept is not None and kept[0].name == plan.choice.name else []
     note(calls, seconds, PLAN_CALLS)
@@ -552,9 +557,10 @@ def note_plan_s(key: tuple, plan: Plan, seconds: float) -> None:
 def _measured_within(key: tuple, started: float, limit: float,
                      notes: list) -> AutoOutcome | None:
     """Under a time limit: the MRT plan of the default target that renders
-    of ``key`` (:func:`plan_key`) in this process took (:data:`_plan_s`),
-    where the median of their seconds ends within :data:`TIME_MARGIN` of the
-    limit, unchecked (its check kept the same plan's image); else None."""
+    of ``key`` (:func:`scene_key` and :func:`plan_key`) in this process took
+    (:data:`_plan_s`), where the median of their seconds ends within
+    :data:`TIME_MARGIN` of the limit, unchecked (its check kept the same
+    plan's image); else None."""
     kept = _plan_s.get(key)
     if kept is None:
         return None

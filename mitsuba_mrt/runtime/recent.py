@@ -1,7 +1,8 @@
 """The last few times a repeated call took, and what the next is expected to take.
 
 ``auto`` plans a time limit from what its stages took in earlier renders
-(OIDN's calls per image size, a preview's stages after its grid).  Each
+(OIDN's calls per image size, a preview's stages after its grid, a
+checked MRT plan).  Each
 keeps the seconds of its last few calls in a list and expects their
 median: one slow call (the machine's noise) does not set it alone.
 """
