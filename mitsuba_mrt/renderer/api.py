@@ -28,7 +28,7 @@ from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
 from ..runtime.jit import counting_kernels
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
                      TracedCounts, check_radiance)
-from . import auto
+from . import auto, kept_plans
 from .held_out import check_image
 from .lanes import is_jit
 from .pilot import effective_area
@@ -187,7 +187,7 @@ def _note_overrun(result: MRTResult) -> None:
 def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             param_overrides) -> MRTResult:
     """:func:`render`'s work, its arguments as given."""
-    start = time.perf_counter()
+    start, recorded = time.perf_counter(), kept_plans.mark()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
@@ -196,6 +196,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
     plan, pattern, grid, check, id_pass, preview_key = None, None, None, False, None, None
+    kept_key = None
     if mode == "auto":
         plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
         if plan is None:
@@ -203,6 +204,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
             plan, grid, check = outcome.plan, outcome.grid, outcome.check
             id_pass, preview_key = outcome.id_pass, outcome.preview_key
+            kept_key = outcome.kept_key
             if outcome.image is not None:
                 return _passes_result(outcome, tracer, params, start)
         choice = plan.choice
@@ -219,7 +221,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=id_pass),
                           params.with_(denoise="oidn" if choice.denoise else "none"),
                           choice.mode, plan, start, progress or _quiet, grid)
-            return _checked(result, scene, pattern, tracer, params, start, progress)
+            return _checked(result, scene, pattern, tracer, params, start, progress, recorded)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
         tracer = replace(tracer, spp=choice.spp, id_pass=id_pass)
@@ -229,14 +231,18 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     result = _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
     if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
         auto.note_preview_after(preview_key, time.perf_counter() - begin)
+    if kept_key is not None:  # (a kept plan at this spp: what it took, for the next limit)
+        kept_plans.note_limited(kept_key, tracer.spp, result.timings.total, recorded)
     return result
 
 
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
-             params: MRTParams, start: float, progress) -> MRTResult:
+             params: MRTParams, start: float, progress, recorded: tuple) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
-    check keeps it (:func:`.auto.keeps`); else ``auto``'s denoised passes,
-    the MRT's seconds and the check's counted as ``check``."""
+    check keeps it (:func:`.auto.keeps`; then :mod:`.kept_plans` keeps what
+    it took, and what its traces recorded since ``recorded``); else
+    ``auto``'s denoised passes, the MRT's seconds and the check's counted as
+    ``check``."""
     held = check_image(result.image, result.traced_mask, tracer,
                        effective_area(tracer.sensor.film().rfilter()))
     plan = result.auto
@@ -247,8 +253,8 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
         key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
-        auto.note_plan_s(key + auto.plan_key(tracer, params), plan,
-                         result.timings.total - held.seconds)
+        kept_plans.note_checked(key + auto.plan_key(tracer, params), plan.choice, plan.reason,
+                                result.timings.total - held.seconds, result.timings, recorded)
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

@@ -19,8 +19,9 @@
    held-out check (:mod:`.held_out`, :func:`keeps`) finds it near a full
    render's quality, else the passes render the image after it.  Under a
    time limit (OIDN installed, at least :data:`HOME_MIN_SPP` spp) such a
-   plan, unchecked, where the process's earlier renders of the scene kept it
-   and took less than the limit (:func:`_measured_within`), else the
+   plan, unchecked, where the process's earlier renders of the scene kept it,
+   at the most spp expected to end within the limit (:func:`_measured_within`,
+   :mod:`.kept_plans`), else the
    :data:`HOME` plan where the grid probe says it ends within the limit
    (:func:`_mrt_within`).
 3. Under a time limit too short for one pass and OIDN on the whole image
@@ -60,6 +61,7 @@ from ..recon.sampling import SamplePattern, every_pixel
 from ..runtime.jit import kernel_seconds
 from ..runtime.recent import note, typical
 from ..types import MRTParams, SeedStream, SparseTrace
+from . import kept_plans
 from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
 from .preview import preview_grid
@@ -221,17 +223,10 @@ _probe_execute: dict = {}
 #: first uses.
 _preview_after_s: dict = {}
 PREVIEW_AFTER_CALLS = 3
-#: What an MRT plan of the default target took where its held-out check kept
-#: its image (the check's own time left out), the last :data:`PLAN_CALLS`
-#: renders per :func:`scene_key` and :func:`plan_key` (the last
-#: :data:`KEPT_COSTS` keys), with the plan: under a time limit that plan is
-#: taken again, unchecked, where their median ends within the limit
-#: (:func:`_measured_within`).
-_plan_s: dict = {}
-PLAN_CALLS = 3
 #: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
-#: then the seconds it took).
-MEASURED_REASON = "{}; took {:.3g} s in this process's renders of the scene, within the time limit"
+#: then its spp and expected seconds).
+MEASURED_REASON = ("{}; at {} spp, {:.3g} s as this process's renders of the scene "
+                   "took: within the time limit")
 
 
 @dataclass
@@ -240,7 +235,9 @@ class AutoOutcome:
     preview's grid, where tracing it told the plan; ``check``: the plan's
     MRT image is to be checked, :func:`keeps`; ``id_pass``: the image's id
     pass, where the plan traced it; ``preview_key``: a preview's key, under
-    which :func:`note_preview_after` keeps what its later stages take)."""
+    which :func:`note_preview_after` keeps what its later stages take;
+    ``kept_key``: a kept plan's key (:mod:`.kept_plans`), under which
+    :func:`~.kept_plans.note_limited` keeps what its render took)."""
 
     plan: Plan
     image: np.ndarray | None = None
@@ -250,6 +247,7 @@ class AutoOutcome:
     check: bool = False
     id_pass: SparseTrace | None = None
     preview_key: tuple | None = None
+    kept_key: tuple | None = None
 
 
 def keeps(held: HeldOut) -> bool:
@@ -319,7 +317,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        outcome = _measured_within(key + plan_key(tracer, params), started, limit, notes)
+        outcome = _measured_within(key + plan_key(tracer, params), started, limit, notes,
+                                   sampler_bakes_spp(tracer.sensor.sampler()))
         if outcome is not None:
             return outcome
         outcome, traced, probed = _mrt_within(scene, pattern, tracer, params, started, notes,
@@ -539,38 +538,26 @@ def scene_key(scene: mi.Scene, tracer, pixels: int) -> tuple:
 
 
 def plan_key(tracer, params: MRTParams) -> tuple:
-    """What :data:`_plan_s`'s key adds to :func:`scene_key`'s: the spp and the
-    parameters but the time limit and quality target."""
+    """What a kept plan's key (:mod:`.kept_plans`) adds to :func:`scene_key`'s:
+    the spp and the parameters but the time limit and quality target."""
     return tracer.spp, replace(params, time_limit=None, noise_threshold=None)
 
 
-def note_plan_s(key: tuple, plan: Plan, seconds: float) -> None:
-    """Keep ``seconds``, what the render of ``plan`` (an MRT plan of the
-    default target, kept by its check) took for ``key`` (:func:`scene_key`
-    and :func:`plan_key`), for a later time limit (:func:`_measured_within`)."""
-    kept = _plan_s.get(key)
-    calls = kept[1] if kept is not None and kept[0].name == plan.choice.name else []
-    note(calls, seconds, PLAN_CALLS)
-    _keep(_plan_s, key, (plan.choice, calls, plan.reason))
-
-
-def _measured_within(key: tuple, started: float, limit: float,
-                     notes: list) -> AutoOutcome | None:
-    """Under a time limit: the MRT plan of the default target that renders
-    of ``key`` (:func:`scene_key` and :func:`plan_key`) in this process took
-    (:data:`_plan_s`), where the median of their seconds ends within
-    :data:`TIME_MARGIN` of the limit, unchecked (its check kept the same
-    plan's image); else None."""
-    kept = _plan_s.get(key)
+def _measured_within(key: tuple, started: float, limit: float, notes: list,
+                     bakes: bool) -> AutoOutcome | None:
+    """Under a time limit: the MRT plan of the default target that a render
+    of ``key`` (:func:`scene_key` and :func:`plan_key`) in this process kept
+    by its check, at the most spp expected to end within :data:`TIME_MARGIN`
+    of the limit (:func:`~.kept_plans.plan_within`; ``bakes``: the sampler
+    compiles kernels per spp), unchecked; else None."""
+    left = started + TIME_MARGIN * limit - time.perf_counter()
+    kept = kept_plans.plan_within(key, left, bakes)
     if kept is None:
         return None
-    choice, calls, reason = kept
-    seconds = typical(calls)
-    if time.perf_counter() + seconds > started + TIME_MARGIN * limit:
-        return None
-    plan = Plan(replace(choice, seconds=seconds), MEASURED_REASON.format(reason, seconds),
-                time_limit=limit, notes=notes, pilot_s=time.perf_counter() - started)
-    return AutoOutcome(plan)
+    choice, reason, seconds = kept
+    plan = Plan(choice, MEASURED_REASON.format(reason, choice.spp, seconds), time_limit=limit,
+                notes=notes, pilot_s=time.perf_counter() - started)
+    return AutoOutcome(plan, kept_key=key)
 
 
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:

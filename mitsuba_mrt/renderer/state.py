@@ -16,7 +16,7 @@ each, with the state that is not a cache and stays.
 from __future__ import annotations
 
 from ..recon import denoise, quadric_jit, rbf_fast
-from . import auto, develop, guides, pixel_filter, replay
+from . import auto, develop, guides, kept_plans, pixel_filter, replay
 
 
 def clear_caches() -> None:
@@ -31,7 +31,7 @@ def clear_caches() -> None:
     auto._probe_recording_s.clear()
     auto._probe_execute.clear()
     auto._preview_after_s.clear()
-    auto._plan_s.clear()
+    kept_plans.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()
     pixel_filter._TABLES.clear()

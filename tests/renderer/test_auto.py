@@ -15,7 +15,7 @@ import mitsuba_mrt
 from mitsuba_mrt import MRTError, MRTParams
 from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
-from mitsuba_mrt.renderer import auto, pilot, preview
+from mitsuba_mrt.renderer import auto, kept_plans, pilot, preview
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
 
 from helpers import SCENES
@@ -195,7 +195,7 @@ def test_a_time_limit_the_id_pass_plan_fits_takes_it_and_traces_the_id_pass_once
 
     scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
     plain = mitsuba_mrt.render(scene)  # (its kernels recorded: the process is warm)
-    monkeypatch.setattr(auto, "_plan_s", {})  # (the plan, planned anew)
+    monkeypatch.setattr(kept_plans, "_plans", {})  # (the plan, planned anew)
     id_passes = []
     original = trace.trace_pixels
 
@@ -232,7 +232,7 @@ def test_a_last_probe_that_rules_the_id_pass_plan_out_spares_the_next_render_s_p
     for limit in (None, 0.02):  # (kernels recorded: the probes below replay)
         mitsuba_mrt.render(scene, time_limit=limit)
     monkeypatch.setattr(auto, "_probe_execute", {})
-    monkeypatch.setattr(auto, "_plan_s", {})  # (the plans, planned anew)
+    monkeypatch.setattr(kept_plans, "_plans", {})  # (the plans, planned anew)
     probes = []
     within = auto._mrt_within
 
@@ -249,35 +249,56 @@ def test_a_last_probe_that_rules_the_id_pass_plan_out_spares_the_next_render_s_p
     assert probes == [True, False, True] and len(auto._probe_execute) == 1
 
 
-def test_a_time_limit_a_checked_plan_took_less_than_takes_that_plan_again(variant,
-                                                                           monkeypatch):
+def test_a_time_limit_takes_the_checked_plan_again_at_the_most_spp_that_fit(variant,
+                                                                          monkeypatch):
     scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
-    monkeypatch.setattr(auto, "_plan_s", {})
+    monkeypatch.setattr(kept_plans, "_plans", {})
     plain = mitsuba_mrt.render(scene)  # the default target: its check keeps the image
     assert plain.auto.reason == auto.HOME_REASON
-    ((key, (choice, calls, reason)),) = auto._plan_s.items()
-    assert choice.label == "idpass+oidn @ 16 spp" and reason == auto.HOME_REASON
-    assert 0 < calls[0] < plain.timings.total  # (its check left out)
+    ((key, kept),) = kept_plans._plans.items()
+    assert kept.choice.label == "idpass+oidn @ 16 spp" and kept.reason == auto.HOME_REASON
+    assert 0 < kept.seconds[16][0] < plain.timings.total  # (its check left out)
+    assert 0 < kept.growing[0] < kept.seconds[16][0]
 
     def no_probe(*args):
         raise AssertionError("the plan was probed")
     with monkeypatch.context() as m:
         m.setattr(auto, "_grid_probe", no_probe)
+        m.setattr(kept_plans, "MOST_SPP_FACTOR", 1)  # (the checked spp the most)
         result = mitsuba_mrt.render(scene, time_limit=60.0)
-    plan = result.auto
-    assert result.mode_used == "idpass" and result.params.denoise == "oidn"
-    assert plan.reason == auto.MEASURED_REASON.format(auto.HOME_REASON, calls[0])
-    assert plan.time_limit == 60.0 and plan.choice.seconds == calls[0]
-    assert np.array_equal(result.image, plain.image)  # the same seed's image, unchecked
-    assert len(auto._plan_s[key][1]) == 1  # (a time-limited render adds no seconds)
-    # the plan is not taken where it took longer than the limit, for other
-    # parameters, or under a quality target
-    auto._plan_s[key] = (choice, [1e3], reason)
-    assert not mitsuba_mrt.render(scene, time_limit=60.0).auto.reason.startswith(reason + "; took")
-    auto._plan_s[key] = (choice, calls, reason)
+        plan = result.auto
+        assert result.mode_used == "idpass" and result.params.denoise == "oidn"
+        assert plan.reason == auto.MEASURED_REASON.format(auto.HOME_REASON, 16,
+                                                          kept.seconds[16][0])
+        assert plan.time_limit == 60.0 and plan.choice.seconds == kept.seconds[16][0]
+        assert np.array_equal(result.image, plain.image)  # the same seed's image, unchecked
+    assert len(kept.seconds[16]) == 2  # (the time-limited render's seconds too)
+    more = mitsuba_mrt.render(scene, time_limit=60.0, spp=32)  # (another key: planned anew)
+    assert not more.auto.reason.startswith(auto.HOME_REASON + "; at")
+    # a long limit: four times the spp, its time kept; the next expects it
+    result = mitsuba_mrt.render(scene, time_limit=60.0)
+    assert result.spp == 64 and result.auto.choice.error is None
+    assert kept.seconds[64] == [result.timings.total]
+    assert mitsuba_mrt.render(scene, time_limit=60.0).auto.choice.seconds == result.timings.total
+    # not taken where no spp would end within the limit, for other parameters,
+    # or under a quality target
+    kept.seconds = {16: [1e3]}
+    assert not mitsuba_mrt.render(scene, time_limit=60.0).auto.reason.startswith(
+        auto.HOME_REASON + "; at")
+    kept.seconds = {16: [0.0]}
     for kwargs in ({"sample_fraction": 0.2}, {"noise_threshold": 0.5}):
         other = mitsuba_mrt.render(scene, time_limit=60.0, **kwargs)
-        assert not other.auto.reason.startswith(reason + "; took")
+        assert not other.auto.reason.startswith(auto.HOME_REASON + "; at")
+
+
+def test_a_sampler_that_bakes_its_spp_keeps_the_checked_plan_s_spp_under_a_time_limit(
+        variant, monkeypatch):
+    scene = mi.load_string(scene_xml(384, spp=16, sampler="stratified").replace(AREA_LIGHT,
+                                                                             POINT_LIGHT))
+    monkeypatch.setattr(kept_plans, "_plans", {})
+    mitsuba_mrt.render(scene)  # (kept by its check)
+    result = mitsuba_mrt.render(scene, time_limit=60.0)  # a new spp would compile
+    assert result.auto.reason.startswith(auto.HOME_REASON + "; at 16 spp")
 
 
 def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(variant):
@@ -336,10 +357,10 @@ def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, mon
 
 def test_an_id_pass_image_that_misses_its_check_gives_way_to_the_passes(variant, monkeypatch):
     monkeypatch.setattr(auto, "CHECK_SLACK", -1.0)  # no estimate is kept
-    monkeypatch.setattr(auto, "_plan_s", {})
+    monkeypatch.setattr(kept_plans, "_plans", {})
     result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
     plan = result.auto
-    assert not auto._plan_s  # (nor its time, for a time limit)
+    assert not kept_plans._plans  # (nor its time, for a time limit)
     assert result.mode_used == "full+oidn" and plan.passes
     assert plan.reason.startswith("idpass+oidn missed its check (")
     assert [c.name for c in plan.candidates] == ["idpass+oidn"]
