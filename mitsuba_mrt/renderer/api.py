@@ -221,7 +221,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=id_pass),
                           params.with_(denoise="oidn" if choice.denoise else "none"),
                           choice.mode, plan, start, progress or _quiet, grid)
-            return _checked(result, scene, pattern, tracer, params, start, progress, recorded)
+            return _checked(result, scene, pattern, tracer, params, start, progress)
         mode = choice.mode
         params = params.with_(denoise="oidn" if choice.denoise else "none")
         tracer = replace(tracer, spp=choice.spp, id_pass=id_pass)
@@ -237,10 +237,10 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
 
 
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
-             params: MRTParams, start: float, progress, recorded: tuple) -> MRTResult:
+             params: MRTParams, start: float, progress) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
     check keeps it (:func:`.auto.keeps`; then :mod:`.kept_plans` keeps what
-    it took, and what its traces recorded since ``recorded``); else
+    it took); else
     ``auto``'s denoised passes, the MRT's seconds and the check's counted as
     ``check``."""
     held = check_image(result.image, result.traced_mask, tracer,
@@ -254,7 +254,7 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
         result.timings.close(time.perf_counter() - start)
         key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
         kept_plans.note_checked(key + auto.plan_key(tracer, params), plan.choice, plan.reason,
-                                result.timings.total - held.seconds, result.timings, recorded)
+                                result.timings.total - held.seconds, result.timings)
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

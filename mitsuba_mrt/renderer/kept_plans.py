@@ -5,12 +5,13 @@ A default render whose held-out check keeps its MRT image (``auto``'s
 (the check's left out) and those of its traces that grow with the spp.  A
 later time-limited render of the same scene takes that plan again,
 unchecked, at the most spp whose expected time ends within the limit
-(:meth:`KeptPlan.spp_within`), from an eighth of the checked spp up to four
-times it: its error beside the alternative's at equal time holds level
-over that range, and its time is a fixed part (the id pass, OIDN on the
-grid, the reconstruction) plus the growing traces.  An spp rendered before
-is expected to take what it took; another, from the checked render's split
-of its time, plus the recordings a new spp makes (:mod:`.replay`).  A
+(:meth:`KeptPlan.spp_within`), from a share of the checked spp (an eighth
+for ``idpass``, a quarter for ``refine``) up to four times it: over that
+range its error beside the alternative's at equal time holds, and its time
+is a fixed part (the id pass, OIDN on the grid, the reconstruction) plus
+the growing traces.  An spp rendered before is expected to take what its
+replays took; another, what the checked render's split of its time says,
+and a little more for the recordings a new spp makes (:mod:`.replay`).  A
 sampler that bakes its spp into the kernels (:func:`.scene_query.sampler_bakes_spp`)
 would compile them at a new spp: there only the spp rendered before count.
 """
@@ -22,17 +23,19 @@ from dataclasses import dataclass, field, replace
 
 from ..modes.plan import Candidate
 from ..runtime.recent import note, typical
-from .replay import recording_seconds, recordings
+from .replay import recordings
 
 #: Plans kept, of the last this many keys (traced objects, pixels, spp, parameters).
 KEPT_PLANS = 16
 #: Renders kept per spp: a plan is expected to take their median.
 PLAN_CALLS = 3
-#: Under a time limit a kept plan renders from this share of its checked spp
-#: up to :data:`MOST_SPP_FACTOR` times it (``bench rival``'s scenes at 256 px:
-#: ``idpass+oidn`` and ``refine+oidn`` at 8-128 spp had 0.66-1.06 times the
-#: alternative's error at equal time, level over the range on each scene).
-LEAST_SPP_SHARE = 1 / 8
+#: Under a time limit a kept plan renders from this share of its checked spp,
+#: per mode, up to :data:`MOST_SPP_FACTOR` times it (``bench rival``'s scenes
+#: at 256 px: ``idpass+oidn`` at 8-128 spp of 64 had 0.66-1.06 times the
+#: alternative's error at equal time, level over the range on each scene;
+#: ``refine+oidn`` traces its edges' pixels at the spp, not denoised: 0.92-0.95
+#: at 16-32 spp on ``cornell``, 1.2 at 10 on ``envmap_objects``).
+LEAST_SPP_SHARE = {"idpass": 1 / 8, "refine": 1 / 4}
 MOST_SPP_FACTOR = 4
 #: The share of the growing traces' time that does not shrink with fewer
 #: spp (each launch's fixed part; at more spp none is assumed, which
@@ -41,10 +44,11 @@ LAUNCH_FIXED = 0.1
 #: The traces whose time grows with the spp, per mode: the grid's, and for
 #: ``refine`` its edges' (``idpass``'s id pass takes its own albedo samples).
 GROWING = {"idpass": ("trace",), "refine": ("trace", "trace_more")}
-#: Recordings a render of the plan at a spp not rendered before makes (its
-#: traces' layouts hold the spp; measured on the gallery at 256 px): the grid
-#: and thin regions of ``idpass``, the grid and rounds of edges of ``refine``.
-NEW_SPP_RECORDINGS = {"idpass": 2, "refine": 4}
+#: A render at an spp not rendered before records its traces anew (their
+#: layouts hold the spp, :mod:`.replay`): it is expected to take this many
+#: times what the split says (the recordings added 5-10 % on the gallery at
+#: 256 and 512 px).
+NEW_SPP_COST = 1.1
 #: The spp tried are those of at most this many significant bits (8, 10, 12,
 #: 14, 16, 20, ...): at most an eighth fewer than would fit, and few spp to
 #: record.
@@ -56,19 +60,19 @@ _plans: dict = {}
 @dataclass
 class KeptPlan:
     """A checked plan (``choice``, its spp the checked one) and what its
-    renders took: per spp, the last :data:`PLAN_CALLS` renders' seconds;
-    at the checked spp, their growing traces' seconds (:data:`GROWING`);
-    and what one recording of a trace took in the last renders that
-    recorded (their median: one slow recording does not set it alone).
+    renders took: per spp, the last :data:`PLAN_CALLS` renders' seconds (at
+    another spp than the checked one, only renders that recorded nothing: a
+    replay's time); at the checked spp, their growing traces' seconds
+    (:data:`GROWING`).
 
     Examples
     --------
     >>> plan = KeptPlan(Candidate("idpass+oidn", "mrt", 64, mode="idpass", denoise=True), "")
-    >>> plan.seconds[64], plan.growing, plan.recording = [0.2], [0.08], [0.005]
+    >>> plan.seconds[64], plan.growing = [0.2], [0.08]
     >>> plan.expected(64), round(plan.expected(32), 3), round(plan.expected(128), 3)
-    (0.2, 0.174, 0.29)
+    (0.2, 0.18, 0.308)
     >>> plan.spp_within(0.25, bakes=False), plan.spp_within(0.25, bakes=True)
-    (96, 64)
+    (80, 64)
     >>> plan.spp_within(0.1, bakes=False) is None
     True
     """
@@ -77,7 +81,6 @@ class KeptPlan:
     reason: str
     seconds: dict = field(default_factory=dict)
     growing: list = field(default_factory=list)
-    recording: list = field(default_factory=list)
 
     def expected(self, spp: int) -> float:
         """Seconds a render at ``spp`` is expected to take (see the module)."""
@@ -86,8 +89,7 @@ class KeptPlan:
         checked = self.choice.spp
         share = spp / checked - 1.0
         grows = typical(self.growing) * (share if share > 0 else (1.0 - LAUNCH_FIXED) * share)
-        return (typical(self.seconds[checked]) + grows
-                + NEW_SPP_RECORDINGS[self.choice.mode] * typical(self.recording or [0.0]))
+        return NEW_SPP_COST * (typical(self.seconds[checked]) + grows)
 
     def spp_within(self, seconds: float, bakes: bool) -> int | None:
         """The most spp expected to take at most ``seconds``, of those rendered
@@ -95,7 +97,8 @@ class KeptPlan:
         tried = set(self.seconds)
         if not bakes:
             checked = self.choice.spp
-            tried |= set(spp_ladder(max(1, math.ceil(checked * LEAST_SPP_SHARE)),
+            least = math.ceil(checked * LEAST_SPP_SHARE[self.choice.mode])
+            tried |= set(spp_ladder(max(1, least),
                                     MOST_SPP_FACTOR * checked))
         return max((spp for spp in tried if self.expected(spp) <= seconds), default=None)
 
@@ -114,17 +117,17 @@ def spp_ladder(least: int, most: int) -> list[int]:
     return sorted(v for v in values if least <= v <= most)
 
 
-def mark() -> tuple[int, float]:
-    """What the traces have recorded so far (for :func:`note_checked`, :func:`note_limited`)."""
-    return recordings(), recording_seconds()
+def mark() -> int:
+    """How many recordings the traces have made so far (for :func:`note_limited`)."""
+    return recordings()
 
 
-def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float, timings,
-                 since: tuple[int, float]) -> None:
+def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
+                 timings) -> None:
     """Keep what a render of ``choice`` (a plan its check kept, at its spp)
-    took for ``key``: ``seconds`` (its check left out), the growing traces
-    of ``timings`` (:class:`~mitsuba_mrt.types.Timings`), and what it recorded
-    since ``since`` (:func:`mark`).  Another plan for ``key`` starts anew."""
+    took for ``key``: ``seconds`` (its check left out) and the growing
+    traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`).  Another
+    plan for ``key`` starts anew."""
     kept = _plans.pop(key, None)
     if kept is None or kept.choice.name != choice.name or kept.choice.spp != choice.spp:
         kept = KeptPlan(replace(choice, seconds=None), reason)
@@ -132,24 +135,18 @@ def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float, tim
     note(kept.seconds.setdefault(choice.spp, []), seconds, PLAN_CALLS)
     note(kept.growing, sum(getattr(timings, part) for part in GROWING[choice.mode]),
          PLAN_CALLS)
-    _note_recording(kept, since)
     _plans[key] = kept
     for old in list(_plans)[:-KEPT_PLANS]:
         del _plans[old]
 
 
-def note_limited(key: tuple, spp: int, seconds: float, since: tuple[int, float]) -> None:
-    """Keep what a time-limited render of ``key``'s plan at ``spp`` took."""
+def note_limited(key: tuple, spp: int, seconds: float, since: int) -> None:
+    """Keep what a time-limited render of ``key``'s plan at ``spp`` took,
+    where it made no recording since ``since`` (:func:`mark`): one that did
+    took what a replay does not."""
     kept = _plans.get(key)
-    if kept is not None:
+    if kept is not None and mark() == since:
         note(kept.seconds.setdefault(spp, []), seconds, PLAN_CALLS)
-        _note_recording(kept, since)
-
-
-def _note_recording(kept: KeptPlan, since: tuple[int, float]) -> None:
-    made, spent = (now - then for now, then in zip(mark(), since))
-    if made > 0:
-        note(kept.recording, spent / made, PLAN_CALLS)
 
 
 def plan_within(key: tuple, seconds: float, bakes: bool) -> tuple[Candidate, str, float] | None:
