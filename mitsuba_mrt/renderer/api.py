@@ -240,9 +240,8 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
              params: MRTParams, start: float, progress) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
     check keeps it (:func:`.auto.keeps`; then :mod:`.kept_plans` keeps what
-    it took); else
-    ``auto``'s denoised passes, the MRT's seconds and the check's counted as
-    ``check``."""
+    it took); else ``auto``'s denoised passes, the MRT's seconds and the
+    check's counted as ``check``."""
     held = check_image(result.image, result.traced_mask, tracer,
                        effective_area(tracer.sensor.film().rfilter()))
     plan = result.auto

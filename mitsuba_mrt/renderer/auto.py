@@ -225,8 +225,8 @@ _preview_after_s: dict = {}
 PREVIEW_AFTER_CALLS = 3
 #: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
 #: then its spp and expected seconds).
-MEASURED_REASON = ("{}; at {} spp, {:.3g} s as this process's renders of the scene "
-                   "took: within the time limit")
+MEASURED_REASON = ("{}; at {} spp, {:.3g} s expected from this process's renders of "
+                   "the scene: within the time limit")
 
 
 @dataclass

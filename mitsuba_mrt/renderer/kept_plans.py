@@ -33,8 +33,9 @@ PLAN_CALLS = 3
 #: per mode, up to :data:`MOST_SPP_FACTOR` times it (``bench rival``'s scenes
 #: at 256 px: ``idpass+oidn`` at 8-128 spp of 64 had 0.66-1.06 times the
 #: alternative's error at equal time, level over the range on each scene;
-#: ``refine+oidn`` traces its edges' pixels at the spp, not denoised: 0.92-0.95
-#: at 16-32 spp on ``cornell``, 1.2 at 10 on ``envmap_objects``).
+#: ``refine+oidn`` traces its edges' pixels at the spp, not denoised: 0.92-0.98
+#: at 16-32 spp on ``cornell``, and at 10 spp on ``envmap_objects`` 1.21 times
+#: the alternative's best within a limit of a quarter of the full render).
 LEAST_SPP_SHARE = {"idpass": 1 / 8, "refine": 1 / 4}
 MOST_SPP_FACTOR = 4
 #: The share of the growing traces' time that does not shrink with fewer
@@ -46,8 +47,8 @@ LAUNCH_FIXED = 0.1
 GROWING = {"idpass": ("trace",), "refine": ("trace", "trace_more")}
 #: A render at an spp not rendered before records its traces anew (their
 #: layouts hold the spp, :mod:`.replay`): it is expected to take this many
-#: times what the split says (the recordings added 5-10 % on the gallery at
-#: 256 and 512 px).
+#: times what the split says (the recordings added 5-10 % on three gallery
+#: scenes at 256 and 512 px).
 NEW_SPP_COST = 1.1
 #: The spp tried are those of at most this many significant bits (8, 10, 12,
 #: 14, 16, 20, ...): at most an eighth fewer than would fit, and few spp to
@@ -98,8 +99,7 @@ class KeptPlan:
         if not bakes:
             checked = self.choice.spp
             least = math.ceil(checked * LEAST_SPP_SHARE[self.choice.mode])
-            tried |= set(spp_ladder(max(1, least),
-                                    MOST_SPP_FACTOR * checked))
+            tried |= set(spp_ladder(max(1, least), MOST_SPP_FACTOR * checked))
         return max((spp for spp in tried if self.expected(spp) <= seconds), default=None)
 
 
