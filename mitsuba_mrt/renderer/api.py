@@ -33,6 +33,7 @@ from .held_out import check_image
 from .lanes import is_jit
 from .pilot import effective_area
 from .pipeline import mrt_image
+from .replay import recordings
 from .scene import resolve_sensor, unwrap
 from .trace import trace_pixels
 
@@ -187,7 +188,7 @@ def _note_overrun(result: MRTResult) -> None:
 def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             param_overrides) -> MRTResult:
     """:func:`render`'s work, its arguments as given."""
-    start, recorded = time.perf_counter(), kept_plans.mark()
+    start, recorded = time.perf_counter(), recordings()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
@@ -232,7 +233,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
         auto.note_preview_after(preview_key, time.perf_counter() - begin)
     if kept_key is not None:  # (a kept plan at this spp: what it took, for the next limit)
-        kept_plans.note_limited(kept_key, tracer.spp, result.timings.total, recorded)
+        kept_plans.note_limited(kept_key, tracer.spp, result.timings.total,
+                                recordings() == recorded)
     return result
 
 

@@ -59,7 +59,7 @@ from ..recon.denoise import denoise_seconds, expected_seconds, oidn_available, p
 from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern, every_pixel
 from ..runtime.jit import kernel_seconds
-from ..runtime.recent import note, typical
+from ..runtime.recent import keep, note, typical
 from ..types import MRTParams, SeedStream, SparseTrace
 from . import kept_plans
 from .held_out import HeldOut
@@ -448,11 +448,7 @@ def _kept_cost(key: tuple, tracer) -> LaunchCost:
 def _keep(table: dict, key: tuple, value):
     """``value`` kept for ``key`` in ``table`` as its most recently used
     entry, of the last :data:`KEPT_COSTS`; returned."""
-    table.pop(key, None)
-    table[key] = value
-    for old in list(table)[:-KEPT_COSTS]:
-        del table[old]
-    return value
+    return keep(table, key, value, KEPT_COSTS)
 
 
 def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
@@ -554,9 +550,9 @@ def _measured_within(key: tuple, started: float, limit: float, notes: list,
     kept = kept_plans.plan_within(key, left, bakes)
     if kept is None:
         return None
-    choice, reason, seconds = kept
-    plan = Plan(choice, MEASURED_REASON.format(reason, choice.spp, seconds), time_limit=limit,
-                notes=notes, pilot_s=time.perf_counter() - started)
+    choice, reason = kept
+    plan = Plan(choice, MEASURED_REASON.format(reason, choice.spp, choice.seconds),
+                time_limit=limit, notes=notes, pilot_s=time.perf_counter() - started)
     return AutoOutcome(plan, kept_key=key)
 
 

@@ -22,8 +22,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 from ..modes.plan import Candidate
-from ..runtime.recent import note, typical
-from .replay import recordings
+from ..runtime.recent import keep, note, typical
 
 #: Plans kept, of the last this many keys (traced objects, pixels, spp, parameters).
 KEPT_PLANS = 16
@@ -117,50 +116,42 @@ def spp_ladder(least: int, most: int) -> list[int]:
     return sorted(v for v in values if least <= v <= most)
 
 
-def mark() -> int:
-    """How many recordings the traces have made so far (for :func:`note_limited`)."""
-    return recordings()
-
-
 def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
                  timings) -> None:
     """Keep what a render of ``choice`` (a plan its check kept, at its spp)
     took for ``key``: ``seconds`` (its check left out) and the growing
     traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`).  Another
     plan for ``key`` starts anew."""
-    kept = _plans.pop(key, None)
-    if kept is None or kept.choice.name != choice.name or kept.choice.spp != choice.spp:
-        kept = KeptPlan(replace(choice, seconds=None), reason)
+    kept = _plans.get(key)
+    if kept is None or kept.choice.name != choice.name:  # (the key holds the spp)
+        kept = KeptPlan(choice, reason)
     kept.choice, kept.reason = replace(choice, seconds=None), reason
     note(kept.seconds.setdefault(choice.spp, []), seconds, PLAN_CALLS)
     note(kept.growing, sum(getattr(timings, part) for part in GROWING[choice.mode]),
          PLAN_CALLS)
-    _plans[key] = kept
-    for old in list(_plans)[:-KEPT_PLANS]:
-        del _plans[old]
+    keep(_plans, key, kept, KEPT_PLANS)
 
 
-def note_limited(key: tuple, spp: int, seconds: float, since: int) -> None:
+def note_limited(key: tuple, spp: int, seconds: float, replayed: bool) -> None:
     """Keep what a time-limited render of ``key``'s plan at ``spp`` took,
-    where it made no recording since ``since`` (:func:`mark`): one that did
+    where it ``replayed`` its traces (:mod:`.replay`): one that recorded
     took what a replay does not."""
     kept = _plans.get(key)
-    if kept is not None and mark() == since:
+    if kept is not None and replayed:
         note(kept.seconds.setdefault(spp, []), seconds, PLAN_CALLS)
 
 
-def plan_within(key: tuple, seconds: float, bakes: bool) -> tuple[Candidate, str, float] | None:
+def plan_within(key: tuple, seconds: float, bakes: bool) -> tuple[Candidate, str] | None:
     """(the plan kept for ``key`` at the most spp expected to end within
-    ``seconds``, its reason, its expected seconds), or None: see the module."""
+    ``seconds``, those seconds its own; its reason), or None: see the module."""
     kept = _plans.get(key)
     if kept is None:
         return None
     spp = kept.spp_within(seconds, bakes)
     if spp is None:
         return None
-    expected = kept.expected(spp)
     choice = kept.choice if spp == kept.choice.spp else replace(kept.choice, error=None)
-    return replace(choice, spp=spp, seconds=expected), kept.reason, expected
+    return replace(choice, spp=spp, seconds=kept.expected(spp)), kept.reason
 
 
 def clear() -> None:
