@@ -27,3 +27,12 @@ def true_ids(variant):
         return full.trace.ids(rule).reshape(full.ids.shape)
 
     return ids
+
+
+@pytest.fixture(autouse=True)
+def no_kept_plans(monkeypatch):
+    """Every test starts with no plan kept by another test's renders: a default
+    ``auto`` render takes the plan an earlier one of its scene kept."""
+    from mitsuba_mrt.renderer import kept_plans
+
+    monkeypatch.setattr(kept_plans, "_plans", {})

@@ -232,9 +232,9 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     result = _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
     if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
         auto.note_preview_after(preview_key, time.perf_counter() - begin)
-    if kept_key is not None:  # (a kept plan at this spp: what it took, for the next limit)
-        kept_plans.note_limited(kept_key, tracer.spp, result.timings.total,
-                                recordings() == recorded)
+    if kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
+        kept_plans.note_render(kept_key, tracer.spp, result.timings.total,
+                               recordings() == recorded)
     return result
 
 

@@ -1,6 +1,9 @@
 """Mode ``auto``: denoised passes, a full render or the MRT, by measurement.
 
-:func:`run_auto` takes the first of these that applies:
+:func:`run_auto` takes the first of these that applies (under the default
+target a plan that an earlier default render of the scene in this process
+kept, :mod:`.kept_plans`, is taken again before them, without the probes,
+the check or the estimates that chose it: :func:`_again`):
 
 1. A noise-free scene (:func:`noise_free`, a small probe): the full render,
    which is exact.
@@ -223,6 +226,8 @@ _probe_execute: dict = {}
 #: first uses.
 _preview_after_s: dict = {}
 PREVIEW_AFTER_CALLS = 3
+#: The reason of a plan :func:`_again` takes (``{}``: the kept plan's).
+AGAIN_REASON = "{}; kept from this process's earlier render of the scene"
 #: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
 #: then its spp and expected seconds).
 MEASURED_REASON = ("{}; at {} spp, {:.3g} s expected from this process's renders of "
@@ -237,7 +242,7 @@ class AutoOutcome:
     pass, where the plan traced it; ``preview_key``: a preview's key, under
     which :func:`note_preview_after` keeps what its later stages take;
     ``kept_key``: a kept plan's key (:mod:`.kept_plans`), under which
-    :func:`~.kept_plans.note_limited` keeps what its render took)."""
+    :func:`~.kept_plans.note_render` keeps what its render took)."""
 
     plan: Plan
     image: np.ndarray | None = None
@@ -299,21 +304,24 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     if not denoise and limit is None:
         return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
                                 target_error=params.noise_threshold, notes=notes))
+    key = scene_key(scene, tracer, width * height)
+    default = limit is None and params.noise_threshold is None
+    if escape and default and denoise:
+        outcome = _again(scene, tracer, params, key, width, height, notes, on_round)
+        if outcome is not None:
+            return outcome
     probe_start = time.perf_counter()
-    if escape and limit is None and params.noise_threshold is None and noise_free(
-            tracer, width, height):
+    if escape and default and noise_free(tracer, width, height):
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))
     traced = _Traced()
-    if escape and denoise and limit is None and params.noise_threshold is None \
-            and spp >= HOME_MIN_SPP:
+    if escape and denoise and default and spp >= HOME_MIN_SPP:
         outcome, traced = _mrt_by_kind(scene, tracer, params, width, height, notes, probe_start)
         if outcome is not None:
             return outcome
     area = effective_area(tracer.sensor.film().rfilter())
     deadline = None if limit is None else started + TIME_MARGIN * limit
-    key = scene_key(scene, tracer, width * height)
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
@@ -385,8 +393,34 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                         None if limit is not None else progress.full_error),
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
                     passes=list(progress.history))
+        if default and denoise:  # (the next default render of the scene takes them again)
+            kept_plans.note_passes(key + plan_key(tracer, params), choice, plan.reason)
         return AutoOutcome(plan, image, alpha, progress, id_pass=traced.id_pass)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+
+
+def _again(scene, tracer, params: MRTParams, key: tuple, width: int, height: int,
+           notes: list, on_round) -> AutoOutcome | None:
+    """Under the default target: the plan an earlier default render of ``key``
+    (:func:`scene_key` and :func:`plan_key`) in this process kept
+    (:func:`~.kept_plans.plan_again`), without the probes, the check or the
+    estimates that chose it; an MRT plan to be rendered (its time kept for
+    ``key``), the passes' image at their kept spp and preset; else None."""
+    key = key + plan_key(tracer, params)
+    kept = kept_plans.plan_again(key)
+    if kept is None:
+        return None
+    choice, reason = kept
+    plan = Plan(choice, AGAIN_REASON.format(reason), notes=notes)
+    if choice.kind == "mrt":
+        return AutoOutcome(plan, kept_key=key)
+    surfaces = _surfaces(scene, tracer, width, height) if choice.shading else None
+    image, alpha, progress = run_passes(
+        tracer, width, height, quality=choice.quality, target_error=None, deadline=None,
+        max_spp=choice.spp, full_spp=tracer.spp, area=1.0, surfaces=surfaces,
+        on_round=on_round, fixed=True)
+    plan.choice = replace(choice, seconds=progress.trace_s + progress.denoise_s)
+    return AutoOutcome(plan, image, alpha, progress)
 
 
 def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, notes: list,

@@ -1,9 +1,15 @@
-"""The checked MRT plans a process has rendered, and the spp that fits a time limit.
+"""The plans a process's default renders measured, taken again by its later renders.
 
 A default render whose held-out check keeps its MRT image (``auto``'s
 ``idpass+oidn`` or ``refine+oidn``) notes here what it took: its seconds
 (the check's left out) and those of its traces that grow with the spp.  A
-later time-limited render of the same scene takes that plan again,
+default render whose denoised passes ended notes their spp, OIDN preset
+and whether the textures were denoised as shading.  A later default
+render of the same key (traced objects, pixels, spp, parameters) takes
+that plan again (:func:`plan_again`), without the probes, the check or
+the passes' estimates that chose it.
+
+A later time-limited render of the same key takes a kept MRT plan,
 unchecked, at the most spp whose expected time ends within the limit
 (:meth:`KeptPlan.spp_within`), from a share of the checked spp (an eighth
 for ``idpass``, a quarter for ``refine``) up to four times it: over that
@@ -59,7 +65,8 @@ _plans: dict = {}
 
 @dataclass
 class KeptPlan:
-    """A checked plan (``choice``, its spp the checked one) and what its
+    """A plan a default render kept (``choice``, its spp the render's: an MRT
+    plan its check kept, or denoised passes) and what the MRT plan's
     renders took: per spp, the last :data:`PLAN_CALLS` renders' seconds (at
     another spp than the checked one, only renders that recorded nothing: a
     replay's time); at the checked spp, their growing traces' seconds
@@ -132,20 +139,33 @@ def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
     keep(_plans, key, kept, KEPT_PLANS)
 
 
-def note_limited(key: tuple, spp: int, seconds: float, replayed: bool) -> None:
-    """Keep what a time-limited render of ``key``'s plan at ``spp`` took,
-    where it ``replayed`` its traces (:mod:`.replay`): one that recorded
-    took what a replay does not."""
+def note_passes(key: tuple, choice: Candidate, reason: str) -> None:
+    """Keep ``choice``, the denoised passes a default render of ``key`` ended
+    with (their spp, preset and shading), and its ``reason``."""
+    keep(_plans, key, KeptPlan(replace(choice, seconds=None), reason), KEPT_PLANS)
+
+
+def note_render(key: tuple, spp: int, seconds: float, replayed: bool) -> None:
+    """Keep what a render of ``key``'s kept MRT plan at ``spp`` took, where it
+    ``replayed`` its traces (:mod:`.replay`): one that recorded took what a
+    replay does not."""
     kept = _plans.get(key)
-    if kept is not None and replayed:
+    if kept is not None and kept.choice.kind == "mrt" and replayed:
         note(kept.seconds.setdefault(spp, []), seconds, PLAN_CALLS)
 
 
+def plan_again(key: tuple) -> tuple[Candidate, str] | None:
+    """(the plan kept for ``key``, its reason), or None: what a default
+    render takes again."""
+    kept = _plans.get(key)
+    return None if kept is None else (kept.choice, kept.reason)
+
+
 def plan_within(key: tuple, seconds: float, bakes: bool) -> tuple[Candidate, str] | None:
-    """(the plan kept for ``key`` at the most spp expected to end within
+    """(the MRT plan kept for ``key`` at the most spp expected to end within
     ``seconds``, those seconds its own; its reason), or None: see the module."""
     kept = _plans.get(key)
-    if kept is None:
+    if kept is None or kept.choice.kind != "mrt":
         return None
     spp = kept.spp_within(seconds, bakes)
     if spp is None:

@@ -689,7 +689,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                target_error: float | None, deadline: float | None, max_spp: int,
                full_spp: int, area: float, denoise: bool = True,
                stop_early=None, on_round=None, surfaces: tuple | None = None,
-               cost: LaunchCost | None = None) -> tuple[np.ndarray, np.ndarray, Progress]:
+               cost: LaunchCost | None = None, fixed: bool = False
+               ) -> tuple[np.ndarray, np.ndarray, Progress]:
     """Trace passes until the target, the deadline or ``max_spp``; return
     (image (height, width, 3), alpha (height, width), :class:`Progress`).
 
@@ -708,7 +709,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     the last OIDN call denoise the textured pixels as their shading
     (:attr:`Passes.shading`).  ``cost`` holds the launches of earlier
     renders of the same objects and image size (a launch of an spp among
-    them is taken to replay), and gets this render's.
+    them is taken to replay), and gets this render's.  ``fixed``: one
+    launch of ``max_spp`` and OIDN at ``quality``, nothing estimated (a plan
+    an earlier render measured).
     """
     xy = every_pixel(width, height)
     n = len(xy)
@@ -732,7 +735,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # companion; the guides throughout), so that the spp launched before
     # replay their kernels (a new spp's compilation is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
-    estimates = not (deadline is not None and target_error is None)
+    estimates = not fixed and not (deadline is not None and target_error is None)
     # a sampler that bakes its spp stratifies a pixel's samples: the estimates
     # take a launch of their own, over every other row of the strips
     if estimates and bakes:
@@ -742,7 +745,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else
              lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))
-    if not estimates:
+    if fixed:
+        round_size = max_spp
+    elif not estimates:
         oidn_s = expected_seconds(n, quality) if denoise else 0.0
         fits = cost.fits((deadline - time.perf_counter() - oidn_s) / ROUND_SAFETY)
         round_size = min(fits or cost.cheapest(), max_spp)

@@ -252,7 +252,6 @@ def test_a_last_probe_that_rules_the_id_pass_plan_out_spares_the_next_render_s_p
 def test_a_time_limit_takes_the_checked_plan_again_at_the_most_spp_that_fit(variant,
                                                                           monkeypatch):
     scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
-    monkeypatch.setattr(kept_plans, "_plans", {})
     plain = mitsuba_mrt.render(scene)  # the default target: its check keeps the image
     assert plain.auto.reason == auto.HOME_REASON
     ((key, kept),) = kept_plans._plans.items()
@@ -297,7 +296,6 @@ def test_a_sampler_that_bakes_its_spp_keeps_the_checked_plan_s_spp_under_a_time_
         variant, monkeypatch):
     scene = mi.load_string(scene_xml(384, spp=16, sampler="stratified").replace(AREA_LIGHT,
                                                                              POINT_LIGHT))
-    monkeypatch.setattr(kept_plans, "_plans", {})
     mitsuba_mrt.render(scene)  # (kept by its check)
     result = mitsuba_mrt.render(scene, time_limit=60.0)  # a new spp would compile
     assert result.auto.reason.startswith(auto.HOME_REASON + "; at 16 spp")
@@ -351,6 +349,7 @@ def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, mon
     # counted as a trace beside the passes'
     monkeypatch.setattr(auto, "trace_shapes",
                         lambda scene, sensor, xy, replay=False: np.ones(len(xy), np.int64))
+    monkeypatch.setattr(kept_plans, "_plans", {})  # (the plan, planned anew)
     result = mitsuba_mrt.render(scene)
     assert result.mode_used == "full+oidn" and result.auto.passes
     assert any("of the pixels at an edge between ids" in n for n in result.auto.notes)
@@ -359,10 +358,11 @@ def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, mon
 
 def test_an_id_pass_image_that_misses_its_check_gives_way_to_the_passes(variant, monkeypatch):
     monkeypatch.setattr(auto, "CHECK_SLACK", -1.0)  # no estimate is kept
-    monkeypatch.setattr(kept_plans, "_plans", {})
     result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
     plan = result.auto
-    assert not kept_plans._plans  # (nor its time, for a time limit)
+    # the passes are kept, not the MRT's plan (nor its time, for a time limit)
+    (kept,) = kept_plans._plans.values()
+    assert kept.choice.kind == "denoised" and kept.choice.spp == result.spp
     assert result.mode_used == "full+oidn" and plan.passes
     assert plan.reason.startswith("idpass+oidn missed its check (")
     assert [c.name for c in plan.candidates] == ["idpass+oidn"]
@@ -407,6 +407,42 @@ def test_by_default_the_passes_meet_the_full_renders_noise(scene):
     truth = mitsuba_mrt.render_reference(scene, spp=128)[0]
     full = mitsuba_mrt.render_reference(scene)[0]
     assert np.mean((result.image - truth) ** 2) < np.mean((full - truth) ** 2)
+
+
+def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant,
+                                                                         monkeypatch):
+    from mitsuba_mrt.renderer import api, progressive
+
+    point_lit = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    area_lit = mi.load_string(scene_xml(384, spp=16))
+    first = {name: mitsuba_mrt.render(s) for name, s in (("mrt", point_lit),
+                                                          ("passes", area_lit))}
+    assert first["mrt"].auto.reason == auto.HOME_REASON and first["passes"].auto.passes
+
+    def not_again(*args, **kwargs):
+        raise AssertionError("the plan was chosen anew")
+    with monkeypatch.context() as m:
+        for module, name in ((auto, "noise_free"), (auto, "_mrt_by_kind"),
+                             (progressive, "_estimate"), (api, "check_image")):
+            m.setattr(module, name, not_again)
+        mrt, passes = mitsuba_mrt.render(point_lit), mitsuba_mrt.render(area_lit)
+        mrt = mitsuba_mrt.render(point_lit)  # (Dr.Jit records a layout's first two calls)
+    # the MRT plan: the same image (the same seed), unchecked, its replay's time kept
+    assert mrt.auto.reason == auto.AGAIN_REASON.format(auto.HOME_REASON)
+    assert mrt.auto.choice.label == "idpass+oidn @ 16 spp" and mrt.timings.check == 0
+    assert np.array_equal(mrt.image, first["mrt"].image)
+    (kept,) = [k for k in kept_plans._plans.values() if k.choice.kind == "mrt"]
+    assert kept.seconds[16][-1] == mrt.timings.total
+    # the passes: their spp in one launch, at their preset, nothing estimated
+    plan = passes.auto
+    assert plan.reason == auto.AGAIN_REASON.format(first["passes"].auto.reason)
+    assert passes.spp == first["passes"].spp and not plan.passes
+    assert plan.choice.quality == first["passes"].auto.choice.quality
+    # chosen anew under a time limit (the passes' plan is no MRT plan to scale),
+    # a quality target, or at another spp
+    for kwargs in ({"time_limit": 60.0}, {"noise_threshold": 0.5}, {"spp": 32}):
+        assert not mitsuba_mrt.render(area_lit, **kwargs).auto.reason.endswith(
+            auto.AGAIN_REASON.format(""))
 
 
 def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
