@@ -7,7 +7,7 @@ time-error curve: at each time the lower of the two).  Per scene this
 experiment measures, warm and alternating in one process, each round of
 repeats with its own seed (times: the median; errors: the mean): the full
 render at the scene's spp (time 1), the alternative's ladder, the default
-``auto``, ``auto`` under time limits of
+``auto`` (planned anew, then taking that plan again), ``auto`` under time limits of
 :data:`LIMITS` of the full render, and each MRT configuration.  Errors are
 against converged renders (:data:`CONVERGED_SPP`): the film's own filter
 for the full render and the MRT, a box filter for the denoised renders.
@@ -39,6 +39,10 @@ LADDER = (1, 2, 4, 8, 16, 32, 64)
 #: OIDN's presets the alternative runs its ladder at, and the prefix of each
 #: one's methods (``oidn@4``, ``oidn-high@4``).
 ALTERNATIVE = {"fast": "oidn@", "high": "oidn-high@"}
+#: The default ``auto`` with no plan kept from an earlier render of the scene
+#: (:mod:`~mitsuba_mrt.renderer.kept_plans`): probes, check and estimates
+#: included.  Each round runs it just before ``auto``, which takes its plan.
+PLANNED = "auto (planned anew)"
 #: ``auto --time-limit`` as shares of the full render's time.
 LIMITS = (0.1, 0.25, 0.5)
 #: The MRT configurations measured beside ``auto``: (mode, denoise).
@@ -100,6 +104,7 @@ def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarr
 
 def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool) -> list[Row]:
     """Every method of the module on one scene, as :class:`Row` s."""
+    from ..renderer import kept_plans
     from ..renderer.api import GridTracer, render, render_denoised, render_reference
     from ..renderer.scene import load_scene, unwrap
 
@@ -120,7 +125,12 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     methods = {"full": lambda seed: render_reference(scene, spp=spp, seed=seed)}
     for quality, prefix in ALTERNATIVE.items():
         methods.update({f"{prefix}{s}": alternative(s, quality) for s in ladder})
-    methods["auto"] = lambda seed: render(scene, mode="auto", seed=seed)
+
+    def planned(seed):  # the plan chosen anew, as in a process's first render of the scene
+        kept_plans.clear()
+        return render(scene, mode="auto", seed=seed)
+    methods[PLANNED] = planned
+    methods["auto"] = lambda seed: render(scene, mode="auto", seed=seed)  # (the plan kept)
     for m, d in CONFIGS:
         methods[f"{m}+{d}" if d != "none" else m] = (
             lambda seed, m=m, d=d: render(scene, mode=m, denoise=d, seed=seed))
@@ -231,6 +241,9 @@ def verdicts(rows: list[Row]) -> list[dict]:
         mine = [r for r in rows if r.scene == scene]
         auto = next(r for r in mine if r.method == "auto")
         alt = alternative_at(mine, auto.relative_time)
+        planned = next((r for r in mine if r.method == PLANNED), None)
+        planned_ratio = (math.nan if planned is None else
+                         planned.error / alternative_at(mine, planned.relative_time))
         field = {m: alternative_at(mine, auto.relative_time, m) for m in ("rel_mse", "flip")}
         best = min((r.error for r in mine if r.relative_time <= auto.relative_time
                     and not r.method.startswith("auto")), default=float("nan"))
@@ -242,6 +255,7 @@ def verdicts(rows: list[Row]) -> list[dict]:
                                and x.relative_time <= share), default=float("nan"))
                 limits[share] = (r.relative_time / share, r.error, best_in)
         out.append(dict(scene=scene, auto=auto, alternative=alt, best=best, limits=limits,
+                        planned=planned, planned_ratio=planned_ratio,
                         field_ratios={m: getattr(auto, m) / v if v > 0 else math.nan
                                       for m, v in field.items()}))
     return out
@@ -271,9 +285,9 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
                              f"{r.flip:.5f}", r.chose])
     lines = [f"Command: `{command}`", "",
              "| scene | auto chose | auto time | auto error | alternative at that time | "
-             "ratio | relMSE ratio | FLIP ratio | best in hindsight | limits 0.1 / 0.25 / 0.5: "
-             "time / limit, error / alternative's best within |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "ratio | relMSE ratio | FLIP ratio | best in hindsight | planned anew: time, ratio | "
+             "limits 0.1 / 0.25 / 0.5: time / limit, error / alternative's best within |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for v in verdicts(rows):
         a = v["auto"]
         limits = "; ".join(f"{t:.2f}, {e / b:.2f}" if b == b else f"{t:.2f}, -"
@@ -281,7 +295,7 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
         lines.append(f"| {v['scene']} | {a.chose} | {a.relative_time:.2f} | {a.error:.4f} | "
                      f"{v['alternative']:.4f} | {a.error / v['alternative']:.2f} | "
                      f"{v['field_ratios']['rel_mse']:.2f} | {v['field_ratios']['flip']:.2f} | "
-                     f"{v['best']:.4f} | {limits} |")
+                     f"{v['best']:.4f} | {_planned(v)} | {limits} |")
     Path(out.path("rival.md")).write_text("\n".join(lines) + "\n")
     scenes = list(dict.fromkeys(r.scene for r in rows))
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.0), squeeze=False)
@@ -293,7 +307,8 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
                 ax.plot(*zip(*alt), "o-", color=shade, label=f"full + OIDN {quality} (box)")
         for r in mine:
             if r.method.startswith("auto"):
-                ax.plot(r.relative_time, r.error, "r*" if r.method == "auto" else "rx")
+                marker = {"auto": "r*", PLANNED: "r+"}.get(r.method, "rx")
+                ax.plot(r.relative_time, r.error, marker)
             elif not _alternative(r.method):
                 ax.plot(r.relative_time, r.error, "b." if r.method != "full" else "ks")
         ax.set_xscale("log")
@@ -305,6 +320,12 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
     fig.tight_layout()
     fig.savefig(out.path("rival.png"), dpi=90, format="png")
     plt.close(fig)
+
+
+def _planned(verdict: dict) -> str:
+    """The table's cell of ``auto`` planned anew: its time, its error's ratio."""
+    row = verdict["planned"]
+    return "-" if row is None else f"{row.relative_time:.2f}, {verdict['planned_ratio']:.2f}"
 
 
 def run_rival(out_dir, scenes: list[tuple[str, str, dict]], repeats: int = 2,

@@ -4,7 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from mitsuba_mrt.bench.rival import Row, alternative_at, at_time, rel_mse, run_rival, verdicts
+from mitsuba_mrt.bench.rival import (PLANNED, Row, alternative_at, at_time, rel_mse, run_rival,
+                                     verdicts)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -14,6 +15,7 @@ def rows():
            ((1, 0.1, 0.04), (4, 0.4, 0.02), (16, 1.6, 0.01))]
     out += [Row("s", "full", 64, 1.0, 1.0, 0.03, 0.0),
             Row("s", "auto", 64, 0.0, 0.2, 0.02, 0.0, "refine+oidn @ 64 spp"),
+            Row("s", PLANNED, 64, 0.0, 0.4, 0.02, 0.0, "refine+oidn @ 64 spp"),
             Row("s", "refine+oidn", 64, 0.0, 0.15, 0.018, 0.0),
             Row("s", "auto --time-limit 0.25", 64, 0.0, 0.26, 0.021, 0.0)]
     return out
@@ -40,6 +42,7 @@ def test_verdicts_compare_auto_with_the_alternative_and_hindsight():
     (v,) = verdicts(rows())
     assert v["auto"].method == "auto" and v["alternative"] == pytest.approx(0.02828, rel=1e-3)
     assert v["best"] == 0.018  # refine+oidn, within auto's time; auto itself not counted
+    assert v["planned"].method == PLANNED and v["planned_ratio"] == pytest.approx(1.0)
     ratio, error, best_within = v["limits"][0.25]
     assert ratio == pytest.approx(0.26 / 0.25) and error == 0.021 and best_within == 0.04
 
@@ -61,7 +64,7 @@ def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant):
     lines = (tmp_path / "rival.csv").read_text().splitlines()
     methods = {line.split(",")[1] for line in lines[1:]}
     assert lines[0].split(",")[7] == "flip"
-    assert {"full", "oidn@1", "oidn@4", "oidn-high@4", "auto", "fast", "refine+oidn",
+    assert {"full", "oidn@1", "oidn@4", "oidn-high@4", "auto", PLANNED, "fast", "refine+oidn",
             "auto --time-limit 0.1"} <= methods
 
 
