@@ -405,20 +405,20 @@ def _again(scene, tracer, params: MRTParams, key: tuple, width: int, height: int
     (:func:`scene_key` and :func:`plan_key`) in this process kept
     (:func:`~.kept_plans.plan_again`), without the probes, the check or the
     estimates that chose it; an MRT plan to be rendered (its time kept for
-    ``key``), the passes' image at their kept spp and preset; else None."""
-    key = key + plan_key(tracer, params)
-    kept = kept_plans.plan_again(key)
+    its key), the passes' image at their kept spp and preset (their launch
+    kept for a time limit's passes, :func:`_kept_cost`); else None."""
+    kept = kept_plans.plan_again(key + plan_key(tracer, params))
     if kept is None:
         return None
     choice, reason = kept
     plan = Plan(choice, AGAIN_REASON.format(reason), notes=notes)
     if choice.kind == "mrt":
-        return AutoOutcome(plan, kept_key=key)
+        return AutoOutcome(plan, kept_key=key + plan_key(tracer, params))
     surfaces = _surfaces(scene, tracer, width, height) if choice.shading else None
     image, alpha, progress = run_passes(
         tracer, width, height, quality=choice.quality, target_error=None, deadline=None,
         max_spp=choice.spp, full_spp=tracer.spp, area=1.0, surfaces=surfaces,
-        on_round=on_round, fixed=True)
+        on_round=on_round, cost=_kept_cost(key, tracer), fixed=True)
     plan.choice = replace(choice, seconds=progress.trace_s + progress.denoise_s)
     return AutoOutcome(plan, image, alpha, progress)
 
