@@ -407,13 +407,14 @@ def _again(scene, tracer, params: MRTParams, key: tuple, width: int, height: int
     estimates that chose it; an MRT plan to be rendered (its time kept for
     its key), the passes' image at their kept spp and preset (their launch
     kept for a time limit's passes, :func:`_kept_cost`); else None."""
-    kept = kept_plans.plan_again(key + plan_key(tracer, params))
+    kept_key = key + plan_key(tracer, params)
+    kept = kept_plans.plan_again(kept_key)
     if kept is None:
         return None
     choice, reason = kept
     plan = Plan(choice, AGAIN_REASON.format(reason), notes=notes)
     if choice.kind == "mrt":
-        return AutoOutcome(plan, kept_key=key + plan_key(tracer, params))
+        return AutoOutcome(plan, kept_key=kept_key)
     surfaces = _surfaces(scene, tracer, width, height) if choice.shading else None
     image, alpha, progress = run_passes(
         tracer, width, height, quality=choice.quality, target_error=None, deadline=None,
