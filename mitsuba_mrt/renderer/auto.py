@@ -305,9 +305,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         return AutoOutcome(Plan(Candidate("full", "full", spp), "no denoiser: the full render",
                                 target_error=params.noise_threshold, notes=notes))
     key = scene_key(scene, tracer, width * height)
+    kept_key = key + plan_key(tracer, params)  # (a kept plan's key)
     default = limit is None and params.noise_threshold is None
     if escape and default and denoise:
-        outcome = _again(scene, tracer, params, key, width, height, notes, on_round)
+        outcome = _again(scene, tracer, key, kept_key, width, height, notes, on_round)
         if outcome is not None:
             return outcome
     probe_start = time.perf_counter()
@@ -325,7 +326,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     surfaces, found, probed = None, False, None
     if escape and limit is not None and denoise and params.noise_threshold is None \
             and spp >= HOME_MIN_SPP:
-        outcome = _measured_within(key + plan_key(tracer, params), started, limit, notes,
+        outcome = _measured_within(kept_key, started, limit, notes,
                                    sampler_bakes_spp(tracer.sensor.sampler()))
         if outcome is not None:
             return outcome
@@ -394,20 +395,20 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     time_limit=limit, pilot_s=progress.estimate_s, notes=notes,
                     passes=list(progress.history))
         if default and denoise:  # (the next default render of the scene takes them again)
-            kept_plans.note_passes(key + plan_key(tracer, params), choice, plan.reason)
+            kept_plans.note_passes(kept_key, choice, plan.reason)
         return AutoOutcome(plan, image, alpha, progress, id_pass=traced.id_pass)
     return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
 
 
-def _again(scene, tracer, params: MRTParams, key: tuple, width: int, height: int,
+def _again(scene, tracer, key: tuple, kept_key: tuple, width: int, height: int,
            notes: list, on_round) -> AutoOutcome | None:
-    """Under the default target: the plan an earlier default render of ``key``
-    (:func:`scene_key` and :func:`plan_key`) in this process kept
-    (:func:`~.kept_plans.plan_again`), without the probes, the check or the
-    estimates that chose it; an MRT plan to be rendered (its time kept for
-    its key), the passes' image at their kept spp and preset (their launch
-    kept for a time limit's passes, :func:`_kept_cost`); else None."""
-    kept_key = key + plan_key(tracer, params)
+    """Under the default target: the plan an earlier default render of
+    ``kept_key`` (``key``, :func:`scene_key`, and :func:`plan_key`) in this
+    process kept (:func:`~.kept_plans.plan_again`), without the probes, the
+    check or the estimates that chose it; an MRT plan to be rendered (its
+    time kept for ``kept_key``), the passes' image at their kept spp and
+    preset (their launch kept for ``key``'s time-limited passes,
+    :func:`_kept_cost`); else None."""
     kept = kept_plans.plan_again(kept_key)
     if kept is None:
         return None
