@@ -296,7 +296,6 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     hears of every round of passes.
     """
     spp, limit = tracer.spp, params.time_limit
-    recorded_before = recordings()
     width, height = pattern.width, pattern.height
     denoise = oidn_available()
     notes = [] if denoise else ["Intel Open Image Denoise is not installed (pip install "
@@ -338,8 +337,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
                                                   notes, probed, traced)
         if outcome is not None:
-            return _filled_preview(outcome, pattern, tracer, params, started,
-                                   recordings() > recorded_before, key)
+            return _filled_preview(outcome, pattern, tracer, params, started, key)
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, traced.shape_index())
     recorded = recordings()
@@ -533,15 +531,13 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
 
 
 def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params: MRTParams,
-                    started: float, recorded: bool, key: tuple) -> AutoOutcome:
+                    started: float, key: tuple) -> AutoOutcome:
     """``outcome``, the preview, its grid pooled from as many 1-spp launches
     as end before the limit (its :data:`TIME_MARGIN`) less what the stages
     after the grid are expected to take: the median of the last previews'
     of ``key`` (:data:`_preview_after_s`), else :data:`FINISH_PER_PIXEL`'s
     (before OIDN's first call at the preview's quality, that call's expected
-    time on top, which holds its set-up): :func:`.preview.preview_grid`.
-    None more where the render has ``recorded`` kernels: Dr.Jit records a
-    layout's first two calls, so the next launch may record too."""
+    time on top, which holds its set-up): :func:`.preview.preview_grid`."""
     kept = _preview_after_s.get(key)
     if kept:
         after = typical(kept)
@@ -550,8 +546,8 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
         after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
             expected_seconds(pattern.count, quality)
             if denoise_seconds(pattern.count, quality) is None else 0.0)
-    until = started if recorded else started + TIME_MARGIN * params.time_limit - after
-    grid = preview_grid(outcome.grid, pattern, tracer, until)
+    grid = preview_grid(outcome.grid, pattern, tracer,
+                        started + TIME_MARGIN * params.time_limit - after)
     outcome.plan.choice = replace(outcome.plan.choice, spp=grid.spp)
     return replace(outcome, grid=grid, preview_key=key)
 

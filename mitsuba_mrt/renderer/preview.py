@@ -20,7 +20,6 @@ import numpy as np
 from ..recon.sampling import SamplePattern
 from ..types import SeedStream, SparseTrace
 from .develop import sample_variance
-from .replay import recordings
 
 #: The most 1-spp launches a preview's grid pools: a bound the time rarely
 #: leaves room for (a preview is taken where one pass of every pixel does not
@@ -70,16 +69,14 @@ def preview_grid(grid: SparseTrace | None, pattern: SamplePattern, tracer,
     """The preview's grid: ``grid`` (its first 1-spp launch; traced here
     where None), pooled with more 1-spp launches while the next is expected
     to end by ``until`` (a ``time.perf_counter()`` value), at most
-    :data:`PREVIEW_MAX_SPP` in all, none after a launch that recorded its
-    kernels.  A launch is expected to take what the last one took."""
-    one, made = replace(tracer, spp=1), recordings()
+    :data:`PREVIEW_MAX_SPP` in all.  A launch is expected to take what the
+    last one took: after one that recorded its kernels, what recording took
+    (the next replays them, or records again without loading them)."""
+    one = replace(tracer, spp=1)
     if grid is None:
         grid = one(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
     traces, step = [grid], grid.seconds
-    # (after a launch that recorded, the next may record too: Dr.Jit records
-    # a layout's first two calls)
-    while (len(traces) < PREVIEW_MAX_SPP and recordings() == made
-           and time.perf_counter() + step <= until):
+    while len(traces) < PREVIEW_MAX_SPP and time.perf_counter() + step <= until:
         begin = time.perf_counter()
         traces.append(one(pattern.pixel_xy, stream=SeedStream.PREVIEW + len(traces),
                           replay=True))

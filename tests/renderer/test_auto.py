@@ -15,7 +15,7 @@ import mitsuba_mrt
 from mitsuba_mrt import MRTError, MRTParams
 from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
-from mitsuba_mrt.renderer import auto, kept_plans, pilot, preview
+from mitsuba_mrt.renderer import auto, kept_plans, pilot
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
 
 from helpers import SCENES
@@ -1073,10 +1073,8 @@ def test_a_stratified_pilot_reference_s_noise_is_its_halves_difference():
 def test_a_preview_leaves_its_later_stages_what_the_last_previews_took(scene, monkeypatch):
     monkeypatch.setattr(auto, "_preview_after_s", {})
     monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
-    for _ in range(3):  # (Dr.Jit records a layout's first calls: no launch pooled after)
+    for _ in range(3):  # (the grid's kernels recorded: a pooled launch replays them)
         mitsuba_mrt.render(scene, time_limit=10.0)
-    # (after other tests' recordings a pooled launch may record again and end the pool)
-    monkeypatch.setattr(preview, "recordings", lambda: 0)
     (key,) = auto._preview_after_s
     auto._preview_after_s.clear()
     first = mitsuba_mrt.render(scene, time_limit=10.0)

@@ -1,7 +1,7 @@
 """auto's preview: its grid pooled from 1-spp launches while the limit allows."""
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import mitsuba as mi
 import numpy as np
@@ -45,6 +45,11 @@ def test_a_preview_pools_1_spp_launches_of_seeds_of_its_own_while_the_limit_allo
     assert grid.spp == PREVIEW_MAX_SPP
     np.testing.assert_allclose(grid.radiance, np.mean([0.0, *streams]))
     assert (grid.variance > 0).all() and (grid.normal == 0.0).all()  # the first's centres
+    # a first launch that took longer than the time left (it recorded its kernels): alone
+    tracer = _Tracer(spp=64)
+    slow = replace(first, seconds=120.0)
+    assert preview_grid(slow, pattern, tracer, until=time.perf_counter() + 60.0) is slow
+    assert tracer.calls == []
     # no time left: the first launch alone, traced here where not given
     tracer = _Tracer(spp=64)
     alone = preview_grid(None, pattern, tracer, until=time.perf_counter() - 1.0)
