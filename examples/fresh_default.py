@@ -1,0 +1,161 @@
+"""The default ``auto`` as a user's first render: each render in a fresh process.
+
+    python examples/fresh_default.py [--rounds 3] [--res 256] [--scenes NAME ...] \
+        [--out docs/bench --name fresh_default]
+
+``bench rival`` measures warm, in one process, where ``auto`` may take the
+plan an earlier render of the scene kept.  A user who runs the CLI renders
+once per process: the plan is made anew, and the kernels come from Dr.Jit's
+disk cache.  Per scene (the gallery at ``--res`` a side and ``paper_fig1``
+with ``path`` at 400 px, as ``bench rival`` renders them), every round
+starts, in turn, one fresh process for the full render, one for the default
+``auto`` and one per rung of the alternative's ladder (every pixel with a
+box filter through OIDN, at its ``fast`` and ``high`` presets: what
+``bench rival`` calls the alternative done right).  Each child reports its
+render call's seconds (imports and scene loading left out: every method pays
+them alike) and saves its image; errors are the report's metric against the
+converged renders ``bench rival`` uses.  Printed per scene: ``auto``'s
+time over the full render's (medians), its plan, and its error over the
+alternative's at that time (interpolated on the alternative's curve, as
+``bench rival`` does).  Modules' bytecode is kept as for a user's Python.
+"""
+
+import argparse
+import csv
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+#: The alternative's ladder here: ``bench rival``'s up to 32 spp (``auto``
+#: takes less than half a full render on every scene).
+LADDER = (1, 2, 4, 8, 16, 32)
+
+#: The child's program: one render; its seconds and plan as one JSON line, its image saved.
+CHILD = """
+import json, sys, time
+import numpy as np
+import mitsuba_mrt
+from mitsuba_mrt import runtime
+runtime.configure()
+mitsuba_mrt.activate("auto")
+path, method, defines, image_path = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), sys.argv[4]
+scene = mitsuba_mrt.load_scene(path, **defines)
+begin = time.perf_counter()
+if method == "full":
+    image = mitsuba_mrt.render_reference(scene)[0]
+    used, chose = "full", "full"
+elif method == "auto":
+    result = mitsuba_mrt.render(scene)
+    image, used, chose = result.image, result.mode_used, result.auto.choice.label
+else:
+    quality, spp = method.split("@")
+    image = mitsuba_mrt.render_denoised(scene, spp=int(spp), quality=quality)[0]
+    used, chose = "full+oidn", method
+seconds = time.perf_counter() - begin
+np.save(image_path, np.asarray(image, dtype=np.float32)[..., :3])
+print(json.dumps({"seconds": seconds, "used": used, "chose": chose}))
+"""
+
+
+def _child(path: Path, method: str, defines: dict, folder: str) -> tuple[dict, np.ndarray]:
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)  # (as a user's Python: bytecode kept)
+    image_path = os.path.join(folder, "image.npy")
+    out = subprocess.run([sys.executable, "-c", CHILD, str(path), method, json.dumps(defines),
+                          image_path], env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        lines = out.stderr.strip().splitlines() or [f"exit status {out.returncode}"]
+        sys.exit(f"error: {method} render of {path.name} failed: {lines[-1]}")
+    return json.loads(out.stdout.strip().splitlines()[-1]), np.load(image_path)
+
+
+def _truth(path: Path, defines: dict) -> dict:
+    """The converged renders of ``bench rival`` (film filter, box filter)."""
+    from mitsuba_mrt.bench.rival import CONVERGED_SPP, _converged
+    from mitsuba_mrt.renderer.api import GridTracer
+    from mitsuba_mrt.renderer.scene import load_scene, unwrap
+
+    scene = load_scene(str(path), **defines)
+    sensor = scene.sensors()[0]
+    width, height = (int(v) for v in sensor.film().crop_size())
+    tracer = GridTracer(scene, sensor, unwrap(scene, None).nested,
+                        int(sensor.sampler().sample_count()), 0)
+    return {used: _converged(tracer, width, height, CONVERGED_SPP, box)
+            for used, box in (("film", False), ("box", True))}
+
+
+def measure(path: Path, name: str, defines: dict, rounds: int) -> list:
+    """``bench rival``'s rows of the full render, the default ``auto`` and
+    the alternative's ladder, each render in a fresh process."""
+    from mitsuba_mrt.bench.rival import ALTERNATIVE, Row
+    from mitsuba_mrt.recon.metrics import paper_error
+
+    truth = _truth(path, defines)
+    methods = ["full", "auto"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
+    runs = {m: [] for m in methods}
+    with tempfile.TemporaryDirectory() as folder:
+        for _ in range(rounds):
+            for method in methods:
+                report, image = _child(path, method, defines, folder)
+                reference = truth["box" if report["used"] == "full+oidn" else "film"]
+                runs[method].append((report["seconds"], paper_error(image, reference),
+                                     report["chose"]))
+    full = statistics.median(r[0] for r in runs["full"])
+    rows = []
+    for method, rs in runs.items():
+        seconds = statistics.median(r[0] for r in rs)
+        chose = max(set(r[2] for r in rs), key=[r[2] for r in rs].count)
+        label = method
+        if "@" in method:  # (bench rival's names of the alternative's rungs)
+            quality, spp = method.split("@")
+            label = f"{ALTERNATIVE[quality]}{spp}"
+        rows.append(Row(name, label, 0, seconds, seconds / full,
+                        float(np.mean([r[1] for r in rs])), float("nan"), chose))
+    return rows
+
+
+def main():
+    from mitsuba_mrt.bench.experiments import GALLERY_SCENES, gallery_defines
+    from mitsuba_mrt.bench.rival import alternative_at
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--res", type=int, default=256)
+    parser.add_argument("--scenes", nargs="+", default=[*GALLERY_SCENES, "paper_fig1"])
+    parser.add_argument("--out", help="also write NAME.csv here (--name)")
+    parser.add_argument("--name", default="fresh_default")
+    args = parser.parse_args()
+    import mitsuba_mrt
+    mitsuba_mrt.activate("auto")
+    rows = []
+    for name in args.scenes:
+        if name == "paper_fig1":
+            path = ROOT / "scenes_xml" / "paper_fig1.xml"
+            defines = {"res": 400, "integrator": "path", "spp": 64, "jitter": "true"}
+        else:
+            path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
+            defines = gallery_defines(name, args.res)
+        mine = measure(path, name, defines, args.rounds)
+        rows += mine
+        auto = next(r for r in mine if r.method == "auto")
+        full = next(r for r in mine if r.method == "full")
+        ratio = auto.error / alternative_at(mine, auto.relative_time)
+        print(f"{name}: full {full.seconds:.3f} s; auto {auto.relative_time:.2f} of it, "
+              f"error {ratio:.2f}x the alternative's at that time ({auto.chose})", flush=True)
+    if args.out:
+        with open(Path(args.out) / f"{args.name}.csv", "w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["scene", "method", "seconds", "relative_time", "error", "chose"])
+            writer.writerows([r.scene, r.method, f"{r.seconds:.4f}", f"{r.relative_time:.4f}",
+                              f"{r.error:.5f}", r.chose] for r in rows)
+
+
+if __name__ == "__main__":
+    main()
