@@ -76,28 +76,14 @@ def _child(path: Path, method: str, defines: dict, folder: str) -> tuple[dict, n
     return json.loads(out.stdout.strip().splitlines()[-1]), np.load(image_path)
 
 
-def _truth(path: Path, defines: dict) -> dict:
-    """The converged renders of ``bench rival`` (film filter, box filter)."""
-    from mitsuba_mrt.bench.rival import CONVERGED_SPP, _converged
-    from mitsuba_mrt.renderer.api import GridTracer
-    from mitsuba_mrt.renderer.scene import load_scene, unwrap
-
-    scene = load_scene(str(path), **defines)
-    sensor = scene.sensors()[0]
-    width, height = (int(v) for v in sensor.film().crop_size())
-    tracer = GridTracer(scene, sensor, unwrap(scene, None).nested,
-                        int(sensor.sampler().sample_count()), 0)
-    return {used: _converged(tracer, width, height, CONVERGED_SPP, box)
-            for used, box in (("film", False), ("box", True))}
-
-
 def measure(path: Path, name: str, defines: dict, rounds: int) -> list:
     """``bench rival``'s rows of the full render, the default ``auto`` and
     the alternative's ladder, each render in a fresh process."""
-    from mitsuba_mrt.bench.rival import ALTERNATIVE, Row
+    from mitsuba_mrt.bench.rival import ALTERNATIVE, Row, converged_truth
     from mitsuba_mrt.recon.metrics import paper_error
+    from mitsuba_mrt.renderer.scene import load_scene
 
-    truth = _truth(path, defines)
+    truth = converged_truth(load_scene(str(path), **defines))
     methods = ["full", "auto"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
     runs = {m: [] for m in methods}
     with tempfile.TemporaryDirectory() as folder:
@@ -123,7 +109,7 @@ def measure(path: Path, name: str, defines: dict, rounds: int) -> list:
 
 def main():
     from mitsuba_mrt.bench.experiments import GALLERY_SCENES, gallery_defines
-    from mitsuba_mrt.bench.rival import alternative_at
+    from mitsuba_mrt.bench.rival import FIG1_DEFINES, alternative_at
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
@@ -138,7 +124,7 @@ def main():
     for name in args.scenes:
         if name == "paper_fig1":
             path = ROOT / "scenes_xml" / "paper_fig1.xml"
-            defines = {"res": 400, "integrator": "path", "spp": 64, "jitter": "true"}
+            defines = FIG1_DEFINES
         else:
             path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
             defines = gallery_defines(name, args.res)

@@ -245,7 +245,7 @@ def _rival(args, command: str) -> int:
     from pathlib import Path
 
     from ..bench.experiments import GALLERY_SCENES, gallery_defines
-    from ..bench.rival import run_rival
+    from ..bench.rival import FIG1_DEFINES, run_rival
     from ..renderer.variants import activate
 
     activate(args.variant)
@@ -254,8 +254,7 @@ def _rival(args, command: str) -> int:
     scenes = [(root / "gallery" / f"{name}.xml", name, gallery_defines(name, res))
               for name in (GALLERY_SCENES[:2] if args.quick else GALLERY_SCENES)]
     scenes.append((root / "paper_fig1.xml", "paper_fig1",
-                   {"res": 64 if args.quick else 400, "integrator": "path", "spp": 64,
-                    "jitter": "true"}))
+                   {**FIG1_DEFINES, **({"res": 64} if args.quick else {})}))
     repeats = (1 if args.quick else 2) if args.repeats is None else args.repeats
     table = run_rival(args.output, scenes, repeats=repeats, quick=args.quick, command=command,
                       echo=lambda line: print(line, file=sys.stderr))

@@ -47,6 +47,8 @@ PLANNED = "auto (planned anew)"
 LIMITS = (0.1, 0.25, 0.5)
 #: The MRT configurations measured beside ``auto``: (mode, denoise).
 CONFIGS = tuple((m, d) for d in ("none", "oidn") for m in ("fast", "refine", "idpass"))
+#: ``paper_fig1``'s ``-D`` values in this experiment (``--quick``: ``res`` 64).
+FIG1_DEFINES = {"res": 400, "integrator": "path", "spp": 64, "jitter": "true"}
 #: Samples per pixel of the converged renders errors are measured against
 #: (rendered as several passes of 64 averaged).
 CONVERGED_SPP = 512
@@ -102,21 +104,30 @@ def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarr
     return (total / passes).reshape(height, width, 3)
 
 
+def converged_truth(scene, spp: int = CONVERGED_SPP) -> dict:
+    """The scene's converged renders errors are measured against, at ``spp``:
+    ``"film"`` through its film's filter (the full render's and the MRT's),
+    ``"box"`` box-filtered (the denoised renders')."""
+    from ..renderer.api import GridTracer
+    from ..renderer.scene import unwrap
+
+    sensor = scene.sensors()[0]
+    width, height = (int(v) for v in sensor.film().crop_size())
+    tracer = GridTracer(scene, sensor, unwrap(scene, None).nested,
+                        int(sensor.sampler().sample_count()), 0)
+    return {"film": _converged(tracer, width, height, spp, False),
+            "box": _converged(tracer, width, height, spp, True)}
+
+
 def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool) -> list[Row]:
     """Every method of the module on one scene, as :class:`Row` s."""
     from ..renderer import kept_plans
-    from ..renderer.api import GridTracer, render, render_denoised, render_reference
-    from ..renderer.scene import load_scene, unwrap
+    from ..renderer.api import render, render_denoised, render_reference
+    from ..renderer.scene import load_scene
 
     scene = load_scene(path, **defines)
-    sensor = scene.sensors()[0]
-    width, height = (int(v) for v in sensor.film().crop_size())
-    spp = int(sensor.sampler().sample_count())
-    nested = unwrap(scene, None).nested
-    tracer = GridTracer(scene, sensor, nested, spp, 0)
-    converged_spp = QUICK_CONVERGED_SPP if quick else CONVERGED_SPP
-    truth = {"film": _converged(tracer, width, height, converged_spp, False),
-             "box": _converged(tracer, width, height, converged_spp, True)}
+    spp = int(scene.sensors()[0].sampler().sample_count())
+    truth = converged_truth(scene, QUICK_CONVERGED_SPP if quick else CONVERGED_SPP)
     ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
 
     def alternative(s, quality):
