@@ -364,9 +364,6 @@ class SeedStream(enum.IntEnum):
     LADDER = 16
     #: ``auto``'s preview: its grid's k-th launch after the first (``PREVIEW + k``)
     PREVIEW = 4096
-    #: the passes' estimate with a stratifying sampler: the estimate's pixels
-    #: again, beside the k-th launch (``ESTIMATE + k``)
-    ESTIMATE = 8192
 
 
 class Tracer(Protocol):

@@ -23,8 +23,8 @@ their cap is not estimated, only predicted.  A sampler that stratifies a
 pixel's samples (all of Mitsuba's but ``independent``) makes its odd and
 even samples no independent halves (their difference overstates the noise,
 and the estimate said 0): there the whole round is denoised and compared
-with a launch of its own over every other estimated row, as many spp with
-other random numbers, less that launch's noise (half the two's squared
+with every other estimated row traced again in the same launch (other
+lanes, so other random numbers), less those pixels' noise (half the two's squared
 difference).  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 Under a time limit alone no error is estimated: the passes only fill the
@@ -128,10 +128,9 @@ class Passes:
     samples that traced the guides, ``guide_spp`` how many should.  Counts
     are samples per pixel.  With ``companion`` (a sampler that stratifies a
     pixel's samples: its odd and even ones are no independent halves) every
-    launch goes into half 0, and half 1 is a launch of its own, with another
-    seed and as many spp, of the pixels of ``crop`` at the positions
-    ``companion`` (every other row: :meth:`add_companion`); the estimates
-    read those alone.
+    launch goes into half 0, and half 1 is the same launch's samples, in lanes
+    of their own, of the pixels of ``crop`` at the positions ``companion``
+    (every other row: :meth:`add_companion`); the estimates read those alone.
     """
 
     crop: np.ndarray
@@ -384,26 +383,31 @@ def estimate_rows(height: int, width: int) -> np.ndarray:
 
 
 def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
-                half: int | None, guides: bool) -> None:
+                half: int | None, guides: bool) -> float:
     """Trace every pixel at ``spp`` (launch number ``launch``: its own seed)
     into ``half`` of ``passes`` (None: its even and odd samples into each,
-    or with :attr:`Passes.companion` all of it into half 0), with the guides
-    where ``guides``."""
+    or with :attr:`Passes.companion` all of it into half 0, and in the same
+    launch the companion's pixels into half 1), with the guides where
+    ``guides``; the share of the launch's pixels that are the image's is
+    returned.
+
+    The companion's pixels follow the image's in one launch: a sampler draws
+    each lane's numbers apart (a stratifying one permutes each pixel slot's
+    strata apart), so they are independent of the same pixels' samples, and
+    one launch records one kernel layout, not two (in a fresh process each
+    layout costs its tracing).
+    """
     companion = half is None and passes.companion is not None
-    trace = replace(tracer, spp=spp)(xy, stream=SeedStream.LADDER + launch, aovs=guides,
+    pixels = np.concatenate([xy, xy[passes.crop[passes.companion]]]) if companion else xy
+    trace = replace(tracer, spp=spp)(pixels, stream=SeedStream.LADDER + launch, aovs=guides,
                                      ids=False, box=True, replay=True,
                                      halves=half is None and not companion)
-    passes.add(trace, 0 if companion else half, guides)
-
-
-def _trace_companion(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
-                     guides: bool) -> None:
-    """Launch ``launch``'s companion: the pixels of :attr:`Passes.companion`
-    at ``spp`` with another seed, into half 1 (with the guides where the
-    launch had them: the same kernels)."""
-    passes.add_companion(replace(tracer, spp=spp)(
-        xy[passes.crop[passes.companion]], stream=SeedStream.ESTIMATE + launch,
-        aovs=guides, ids=False, box=True, replay=True))
+    if not companion:
+        passes.add(trace, half, guides)
+        return 1.0
+    passes.add(trace.take(slice(0, len(xy))), 0, guides)
+    passes.add_companion(trace.take(slice(len(xy), None)))
+    return len(xy) / len(pixels)
 
 
 def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full_spp: int,
@@ -666,23 +670,24 @@ def _trace_round(passes: Passes, tracer, xy: np.ndarray, size: int, launch: int,
 
 def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half: int | None,
             cost: LaunchCost) -> float:
-    """:func:`_trace_pass`, then the launch's companion where one is due
-    (:func:`_trace_companion`); its seconds, companion's included, returned.
-    ``cost`` gets the launch alone, and whether it recorded: a time limit
-    alone traces no companion, and plans its launches from these."""
+    """:func:`_trace_pass` (with the launch's companion where one is due); its
+    seconds returned.  ``cost`` gets the launch as if it traced the image's
+    pixels alone (its kernels' time scaled to their share), and whether it
+    recorded: a time limit alone traces no companion, and plans its
+    launches from these."""
     guides = passes.count < passes.guide_spp
     begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
     count = passes.count
     with kernel_seconds() as spent:
-        _trace_pass(passes, tracer, xy, spp, launch, half, guides)
+        share = _trace_pass(passes, tracer, xy, spp, launch, half, guides)
     seconds = time.perf_counter() - begin
     # the spp the sampler took (a square for some); a recording call traces the
     # kernels, which run, or compile, when read back after it
-    cost.add(passes.count - count, seconds, recordings() > recorded, spent.compile,
-             spent.execute, recording_s=recording_seconds() - recording)
-    if half is None and passes.companion is not None:
-        _trace_companion(passes, tracer, xy, spp, launch, guides)
-    return time.perf_counter() - begin
+    recording_s = recording_seconds() - recording
+    alone = recording_s + share * (seconds - recording_s)
+    cost.add(passes.count - count, alone, recordings() > recorded, spent.compile,
+             None if not spent.execute else share * spent.execute, recording_s=recording_s)
+    return seconds
 
 
 def run_passes(tracer, width: int, height: int, *, quality: str,
@@ -737,7 +742,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not fixed and not (deadline is not None and target_error is None)
     # a sampler that bakes its spp stratifies a pixel's samples: the estimates
-    # take a launch of their own, over every other row of the strips
+    # take every other row of the strips again, in the same launches
     if estimates and bakes:
         passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
     # (``cost`` holds launches without their companion: one traces its share of the pixels more)

@@ -942,17 +942,19 @@ def test_a_launch_s_odd_and_even_samples_make_the_two_halves():
 
 
 def test_a_launch_s_cost_leaves_out_its_companion(timed_tracer):
-    # a time limit alone traces no companion: the launches it plans from are the passes' own
+    # a time limit alone traces no companion: the launches it plans from are the
+    # passes' own, the companion's pixels' share of the launch left out
     from mitsuba_mrt.renderer import progressive
 
     Tracer, launched, clock = timed_tracer
-    xy = np.zeros((4, 2), dtype=np.int64)
+    xy = np.arange(8, dtype=np.int64).reshape(4, 2)
     passes, cost = progressive.Passes(np.arange(4)), progressive.LaunchCost()
     passes.companion = np.array([0, 2])
     seconds = progressive._launch(passes, Tracer(2), xy, 2, 0, None, cost)
-    assert launched == [2, 2] and seconds == 6.0  # the launch, then its companion
-    assert [launch[:3] for launch in cost.launches] == [(2, 3.0, False)]
-    assert passes.half_counts == [2, 2]
+    # one launch of the 4 pixels and, after them, the companion's 2
+    assert launched == [2] and seconds == 3.0
+    assert [launch[:3] for launch in cost.launches] == [(2, 2.0, False)]
+    assert passes.half_counts == [2, 2] and passes.count == 2
 
 
 def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_has(
@@ -980,8 +982,8 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     # 30 / 1.15 s holds 9 spp launched before (10 s), not a new 25; then 20 s left
     # hold 9 again, 10 s 4 spp (5 s), and 5 s none
     assert launched == [9, 9, 4] and clock[0] <= 30.0
-    # each as the default rounds' launches were (their estimates have a companion
-    # launch of their own): no odd samples apart, the guides throughout
+    # each as the default rounds' launches were (their estimates have companion
+    # lanes of their own): no odd samples apart, the guides throughout
     assert kinds == [(True, False)] * 3
     # where only 1 spp was launched before, the time fills with 1-spp launches
     launched.clear()
@@ -1021,16 +1023,17 @@ def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
         from mitsuba_mrt.renderer import progressive
 
         # a stratifying sampler's odd and even samples are no independent halves:
-        # each launch has a companion over every other row of the estimate's
+        # each launch traces every other row of the estimate's again, after the image
         rows = len(progressive.estimate_rows(256, 256)) // 2 * 256
-        assert seen[::2] == rounds and seen[1::2] == [(s, False, rows) for s in spp]
+        assert rounds == [] and seen == [(s, False, 256 * 256 + rows) for s, _, _ in seen]
+        spp = [s for s, _, _ in seen]
         assert spp[0] == 8 and spp == sorted(spp)
 
 
 def test_a_stratifying_sampler_s_estimates_see_its_noise(variant):
     # its odd and even samples, strata of one set, differ by more than two
     # independent halves: on this scene their difference said 0 error at 9
-    # spp and met any target; a launch of its own is independent of the round's
+    # spp and met any target; lanes of their own are independent of the round's
     scene = mitsuba_mrt.load_scene(SCENES / "gallery" / "instanced.xml", res=256)
     result = mitsuba_mrt.render(scene)
     (spp, error), = result.auto.passes
