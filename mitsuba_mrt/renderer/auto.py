@@ -449,16 +449,16 @@ def _edge_tested(scene, tracer, params: MRTParams, width: int, height: int,
     """(the pixels traced, whether more than :data:`WIDE_EDGE_SHARE` of them
     lie at an edge between ids: too many for :data:`EDGE_TESTED`'s plans).
 
-    Every edge between shapes is one between ids, so each pixel's shape is
-    traced first, one ray a pixel (:func:`~.trace.trace_shapes`), and the id
-    pass only where few enough pixels lie at an edge between shapes.
+    Each pixel's ids are traced first, without the albedo (one ray a pixel
+    and its lights' shadow rays: a tenth of the id pass's cost), and the id
+    pass only where few enough pixels lie at an edge between them.
     """
-    shapes = trace_shapes(scene, tracer.sensor, every_pixel(width, height), replay=True)
-    if _too_many_edges(shapes, "shapes", width, height, notes):
-        return _Traced(shapes=shapes), True
-    id_pass = _id_pass(tracer, width, height)
-    ids = id_pass.ids(params.rule_for("idpass"))
-    return _Traced(id_pass, shapes), _too_many_edges(ids, "ids", width, height, notes)
+    xy = every_pixel(width, height)
+    ids_alone = tracer(xy, stream=SeedStream.ID_PASS, radiance=False, albedo=False,
+                       replay=True)
+    if _too_many_edges(ids_alone.ids(params.rule_for("idpass")), "ids", width, height, notes):
+        return _Traced(shapes=ids_alone.shape_index), True
+    return _Traced(_id_pass(tracer, width, height), ids_alone.shape_index), False
 
 
 def _too_many_edges(labels: np.ndarray, what: str, width: int, height: int,
