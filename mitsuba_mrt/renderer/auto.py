@@ -5,8 +5,9 @@ target a plan that an earlier default render of the scene in this process
 kept, :mod:`.kept_plans`, is taken again before them, without the probes,
 the check or the estimates that chose it: :func:`_again`):
 
-1. A noise-free scene (:func:`noise_free`, a small probe): the full render,
-   which is exact.
+1. A noise-free scene (:func:`noise_free`, a small probe, where the
+   integrator samples no area light or environment:
+   :func:`~.scene_query.surely_noisy`): the full render, which is exact.
 2. The default target (no time limit, no ``noise_threshold``), OIDN
    installed, at least :data:`HOME_MIN_SPP` spp: an MRT image where the
    scene's kind says it wins (:func:`unmeasured_plan`): :data:`HOME` (mode
@@ -71,7 +72,8 @@ from .preview import preview_grid
 from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
 from .replay import recordings, token
 from .scene_query import (environment_map, has_mirrors, lit_diffuse_by_points,
-                          sampler_bakes_spp, textured_diffuse_shapes, transmits)
+                          sampler_bakes_spp, surely_noisy, textured_diffuse_shapes,
+                          transmits)
 from .trace import trace_shapes
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
@@ -311,7 +313,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         if outcome is not None:
             return outcome
     probe_start = time.perf_counter()
-    if escape and default and noise_free(tracer, width, height):
+    if (escape and default and not surely_noisy(scene, tracer.integrator)
+            and noise_free(tracer, width, height)):
         return AutoOutcome(Plan(Candidate("full", "full", spp, error=0.0),
                                 "noise-free: the full render is exact", target_error=0.0,
                                 pilot_s=time.perf_counter() - probe_start, notes=notes))

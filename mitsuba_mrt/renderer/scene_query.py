@@ -244,6 +244,25 @@ def lit_diffuse_by_points(scene: mi.Scene) -> bool:
             and bool(diffuse_shapes(scene)[1:].all()))
 
 
+#: Mitsuba's integrators that sample the light of the scene's emitters (their
+#: C++ class names, or their Python classes' for those written in Python).
+LIGHT_SAMPLING = frozenset({"PathIntegrator", "DirectIntegrator", "VolumetricPathIntegrator",
+                            "VolumetricSimplePathIntegrator", "VolumetricMISPathIntegrator",
+                            "PRBIntegrator", "PRBVolpathIntegrator"})
+
+
+def surely_noisy(scene: mi.Scene, integrator: mi.Integrator) -> bool:
+    """Whether ``integrator`` samples the light of an emitter of ``scene``
+    that is not a point, spot or directional light (an area light, an
+    environment): each sample of a pixel it lights draws another point or
+    direction of it, so the pixel differs from one set of random numbers to
+    another, and no probe is needed to tell the scene is noisy."""
+    names = {integrator.class_name(), type(integrator).__name__}
+    delta = (mi.EmitterFlags.DeltaPosition, mi.EmitterFlags.DeltaDirection)
+    return bool(names & LIGHT_SAMPLING) and any(
+        not any(mi.has_flag(e.flags(), f) for f in delta) for e in scene.emitters())
+
+
 def environment_map(scene: mi.Scene) -> bool:
     """Whether an environment emitter of ``scene`` varies with direction (an
     ``envmap``, not a ``constant``): its detail, seen or reflected, lies

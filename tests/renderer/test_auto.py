@@ -392,6 +392,23 @@ def test_an_environment_map_takes_the_checked_refined_edges_a_small_image_the_pa
     assert mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64))).auto.passes
 
 
+def test_no_noise_probe_where_the_integrator_samples_an_area_light(scene, monkeypatch):
+    from mitsuba_mrt.renderer.scene_query import surely_noisy
+
+    assert surely_noisy(scene, scene.integrator())  # (path, an area light)
+    point_lit = mi.load_string(scene_xml(64).replace(AREA_LIGHT, POINT_LIGHT))
+    matte = mi.load_string(scene_xml(64).replace(
+        '<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
+        '<integrator type="matte"/>'))
+    assert not surely_noisy(point_lit, point_lit.integrator())
+    assert not surely_noisy(matte, matte.integrator())  # (it samples no light)
+
+    def no_probe(*args):
+        raise AssertionError("probed")
+    monkeypatch.setattr(auto, "noise_free", no_probe)
+    assert mitsuba_mrt.render(scene).mode_used == "full+oidn"
+
+
 def test_the_noise_probe_tells_a_noisy_scene(scene):
     from mitsuba_mrt.renderer.api import GridTracer
     from mitsuba_mrt.renderer.auto import noise_free
