@@ -34,11 +34,9 @@ def main():
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import _converged
+    from mitsuba_mrt.bench.rival import converged_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer import progressive
-    from mitsuba_mrt.renderer.api import GridTracer
-    from mitsuba_mrt.renderer.scene import unwrap
 
     runtime.configure()
     mitsuba_mrt.activate("auto")
@@ -48,11 +46,7 @@ def main():
         if name == "crop_rgba":  # its film holds the crop window
             defines["film_res"] = args.res + 176
         scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml", **defines)
-        sensor = scene.sensors()[0]
-        width, height = (int(v) for v in sensor.film().crop_size())
-        tracer = GridTracer(scene, sensor, unwrap(scene, None).nested,
-                            int(sensor.sampler().sample_count()), 0)
-        truth = _converged(tracer, width, height, 512, True)
+        truth = converged_truth(scene, 512)["box"]
 
         def run(shading, quality):
             progressive.SHADING = shading

@@ -60,7 +60,7 @@ def main():
     parser.add_argument("--ref-spp", type=int, default=8)
     args = parser.parse_args()
     import mitsuba_mrt
-    from mitsuba_mrt.bench.rival import _converged
+    from mitsuba_mrt.bench.rival import converged_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import grid_pattern
     from mitsuba_mrt.renderer import pilot
@@ -78,9 +78,8 @@ def main():
         spp = int(sensor.sampler().sample_count())
         tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, spp, 0)
         xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
-        truth, refs = {}, {}
+        truth, refs = converged_truth(scene, 512), {}
         for kind in ("film", "box"):
-            truth[kind] = _converged(tracer, width, height, 512, kind == "box")
             one = replace(tracer, spp=args.ref_spp)
             # the last pixel apart: a trace of every pixel would splat the film's filter
             halves = [[one(part, stream=300 + 10 * k, aovs=False, replay=True, box=kind == "box")
