@@ -642,7 +642,8 @@ def _surfaces(scene, tracer, width: int, height: int,
 
 class _Traced(NamedTuple):
     """What planning traced of every pixel: the id pass (:func:`_id_pass`)
-    and each pixel's shape (:func:`~.trace.trace_shapes`), None where not."""
+    and each pixel's shape (the centre ray's, from the ids :func:`_edge_tested`
+    traced), None where not."""
 
     id_pass: SparseTrace | None = None
     shapes: np.ndarray | None = None
