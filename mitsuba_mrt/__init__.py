@@ -37,7 +37,11 @@ def activate(variant: str = "auto") -> str:
     """Pick a variant (``auto``: LLVM if libLLVM >= 17, else scalar), set it, register."""
     from .renderer.variants import activate as _activate
 
-    return _activate(variant)
+    chosen = _activate(variant)
+    # The renderer's modules load with the variant rather than inside the
+    # first render, whose time limit counts from the call.
+    from .renderer import api  # noqa: F401
+    return chosen
 
 
 def register() -> None:
