@@ -158,7 +158,10 @@ def every_pixel(width: int, height: int) -> np.ndarray:
     >>> every_pixel(2, 2).tolist()
     [[0, 0], [1, 0], [0, 1], [1, 1]]
     """
-    return np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+    xy = np.empty((height, width, 2), dtype=np.int64)  # (written once: no meshgrid copies)
+    xy[..., 0] = np.arange(width)
+    xy[..., 1] = np.arange(height)[:, None]
+    return xy.reshape(-1, 2)
 
 
 def grid_pattern(width: int, height: int, sample_fraction: float) -> SamplePattern:
