@@ -5,8 +5,8 @@
 
 Per gallery scene at ``--res`` a side (256 by default): the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
-rendering once with ``time_limit``.  Printed: each render's seconds over its
-limit and the plan it chose.  Kernels come from Dr.Jit's disk cache and
+rendering once with ``time_limit``.  Printed: each render call's wall time
+over its limit and the plan it chose.  Kernels come from Dr.Jit's disk cache and
 modules from Python's bytecode cache, as for a user (run it twice after a
 change: the first run fills both); the process has no earlier render to
 learn OIDN's or a pass's cost from.

@@ -34,12 +34,12 @@ __all__ = ["MODES", "MRTError", "MRTParams", "MRTResult", "MRTWarning", "activat
 
 
 def activate(variant: str = "auto") -> str:
-    """Pick a variant (``auto``: LLVM if libLLVM >= 17, else scalar), set it, register."""
+    """Pick a variant (``auto``: LLVM if libLLVM >= 17, else scalar), set it,
+    register the plugins and load the renderer's modules."""
     from .renderer.variants import activate as _activate
 
     chosen = _activate(variant)
-    # The renderer's modules load with the variant rather than inside the
-    # first render, whose time limit counts from the call.
+    # (here rather than inside the first render, whose time limit counts from the call)
     from .renderer import api  # noqa: F401
     return chosen
 
