@@ -37,6 +37,7 @@ def main():
 
     from mitsuba_mrt.recon.denoise import denoise_image
     from mitsuba_mrt.recon.metrics import paper_error
+    from mitsuba_mrt.recon.sampling import every_pixel
     from mitsuba_mrt.renderer.api import GridTracer
     from mitsuba_mrt.renderer.scene import load_scene, unwrap
 
@@ -46,7 +47,7 @@ def main():
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
         tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, 64, 0)
-        xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+        xy = every_pixel(width, height)
         n = len(xy)
         truth = sum(tracer(xy, stream=100 + k, aovs=False, replay=True, box=True).radiance
                     for k in range(4)) / 4

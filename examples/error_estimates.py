@@ -62,7 +62,7 @@ def main():
     import mitsuba_mrt
     from mitsuba_mrt.bench.rival import converged_truth
     from mitsuba_mrt.recon.metrics import paper_error
-    from mitsuba_mrt.recon.sampling import grid_pattern
+    from mitsuba_mrt.recon.sampling import every_pixel, grid_pattern
     from mitsuba_mrt.renderer import pilot
     from mitsuba_mrt.renderer.api import (GridTracer, render, render_denoised,
                                           render_reference)
@@ -77,7 +77,7 @@ def main():
         width, height = (int(v) for v in sensor.film().crop_size())
         spp = int(sensor.sampler().sample_count())
         tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, spp, 0)
-        xy = np.stack(np.meshgrid(np.arange(width), np.arange(height)), -1).reshape(-1, 2)
+        xy = every_pixel(width, height)
         truth, refs = converged_truth(scene, 512), {}
         for kind in ("film", "box"):
             one = replace(tracer, spp=args.ref_spp)

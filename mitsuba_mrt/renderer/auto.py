@@ -459,18 +459,17 @@ def _edge_tested(scene, tracer, params: MRTParams, width: int, height: int,
     xy = every_pixel(width, height)
     ids_alone = tracer(xy, stream=SeedStream.ID_PASS, radiance=False, albedo=False,
                        replay=True)
-    if _too_many_edges(ids_alone.ids(params.rule_for("idpass")), "ids", width, height, notes):
+    if _too_many_edges(ids_alone.ids(params.rule_for("idpass")), width, height, notes):
         return _Traced(shapes=ids_alone.shape_index), True
     return _Traced(_id_pass(tracer, width, height), ids_alone.shape_index), False
 
 
-def _too_many_edges(labels: np.ndarray, what: str, width: int, height: int,
-                    notes: list) -> bool:
+def _too_many_edges(ids: np.ndarray, width: int, height: int, notes: list) -> bool:
     """Whether more than :data:`WIDE_EDGE_SHARE` of the pixels lie at an edge
-    between ``labels`` (the pixels' ``what``; a note says so where they do)."""
-    share = edge_share(labels.reshape(height, width))
+    between ``ids`` (the pixels'; a note says so where they do)."""
+    share = edge_share(ids.reshape(height, width))
     if share > WIDE_EDGE_SHARE:
-        notes.append(f"{share:.1%} of the pixels at an edge between {what}: "
+        notes.append(f"{share:.1%} of the pixels at an edge between ids: "
                      f"too many for the MRT's grid")
     return share > WIDE_EDGE_SHARE
 
