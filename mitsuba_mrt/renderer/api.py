@@ -76,8 +76,9 @@ class MRTResult:
     traced : TracedCounts
         Pixels traced with the nested integrator, by why.
     alpha : ndarray, shape (height, width), or None
-        Alpha as ``mi.render`` develops it: traced at traced pixels, the
-        mean of its region's samples elsewhere (the background's is 0).
+        For an RGBA film, alpha as ``mi.render`` develops it: traced at
+        traced pixels, the mean of its region's samples elsewhere (the
+        background's is 0); None for an RGB film.
     """
 
     image: np.ndarray
@@ -289,8 +290,10 @@ def _mrt(pattern: SamplePattern, tracer: GridTracer, params: MRTParams, mode: st
     made = mrt_image(tracer.scene, pattern, trace, params, mode, tracer)
     progress("reconstruct", 1.0)
     recon = made.recon
-    alpha = region_values(recon.ids, trace.ids(params.rule_for(mode)), trace.alpha, "mean")
-    pattern.put_traced(alpha, trace.alpha)
+    alpha = None  # an RGB film has none: a full-resolution pass saved
+    if tracer.sensor.film().base_channels_count() == 4:
+        alpha = region_values(recon.ids, trace.ids(params.rule_for(mode)), trace.alpha, "mean")
+        pattern.put_traced(alpha, trace.alpha)
     timings = Timings(trace=trace.seconds, trace_more=recon.timings.trace_more,
                       check=plan.pilot_s if plan else 0.0, denoise=made.denoise_s,
                       edges=recon.timings.edges, interpolate=recon.timings.interpolate)
