@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..runtime.threads import for_row_blocks_of
 from .ids import run_starts
 from .sampling import SamplePattern, cell_coordinates
 
@@ -91,7 +92,17 @@ def _neighbour_max(grid_ids: np.ndarray, grid_values: np.ndarray) -> np.ndarray:
     Inside a region (3 x 3 ids all equal, off the grid's border) it is the
     largest of the 8 neighbours, a few separable maxima over the whole grid;
     the other samples (near edges, on the border) are gathered one by one.
+    Blocks of rows run on all cores.
     """
+    out = np.empty(grid_values.shape, dtype=grid_values.dtype)
+    for_row_blocks_of(lambda lo, hi: _block_neighbour_max(grid_ids[lo:hi], grid_values[lo:hi]),
+                      out, halo=1)
+    return out
+
+
+def _block_neighbour_max(grid_ids: np.ndarray, grid_values: np.ndarray) -> np.ndarray:
+    """:func:`_neighbour_max` of a block of whole rows (its first and last
+    rows lack the neighbours beyond it)."""
     nr, nc = grid_ids.shape
     out = np.full(grid_values.shape, -np.inf, dtype=grid_values.dtype)
     inner = np.zeros((nr, nc), dtype=bool)

@@ -19,6 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..runtime.threads import for_row_blocks_of
+
 #: Default strength: how many noise standard deviations apart two samples
 #: may be and still be averaged (the weight falls to 0.61 there).
 SMOOTHING = 1.5
@@ -65,9 +67,25 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
     noise = np.asarray(noise, dtype=np.float64)
     nr, nc, channels = values.shape
     usable = np.ones((nr, nc), dtype=bool) if fixed is None else ~np.asarray(fixed, dtype=bool)
+    scale = -0.5 / (strength * strength * channels)
+    out = np.empty_like(values)
+
+    def rows(lo: int, hi: int) -> np.ndarray:  # (a row's mean reads the rows beside it)
+        return _smoothed_block(grid_ids[lo:hi], values[lo:hi], noise[lo:hi], usable[lo:hi],
+                               scale)
+    for_row_blocks_of(rows, out, halo=1)
+    return out
+
+
+def _smoothed_block(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
+                    usable: np.ndarray, scale: float) -> np.ndarray:
+    """:func:`smooth_grid` of a block of whole rows, a new array (its first
+    and last rows lack the neighbours beyond the block). Each pixel's
+    result depends only on its 3 x 3 neighbourhood, elementwise, so a
+    block's inner rows are bit for bit those of the whole grid's."""
+    nr, nc, channels = values.shape
     total = values.copy()          # the sample itself, weight 1
     weight = np.ones((nr, nc))
-    scale = -0.5 / (strength * strength * channels)
     # the shifts' temporaries, made once: a fresh array costs its pages
     scratch = _Scratch(np.empty((nr, nc, channels)), np.empty((nr, nc, channels)),
                        np.empty((nr, nc)))

@@ -88,6 +88,37 @@ def for_row_blocks(function, rows: int, min_rows: int = 512,
         future.result()
 
 
+#: Fewest rows :func:`for_row_blocks_of` splits by default: a smaller grid's
+#: 3 x 3 stencil (the grid's smoothing, its neighbourhood maxima) takes less
+#: than handing it to the pool.
+STENCIL_ROWS = 128
+
+
+def for_row_blocks_of(function, out: np.ndarray, halo: int = 1,
+                      min_rows: int = STENCIL_ROWS) -> None:
+    """Fill ``out`` by row blocks on all cores: ``function(lo, hi)`` returns
+    the rows ``lo:hi`` of a result whose rows depend on their ``halo`` rows
+    on either side, of which the block's own rows are kept.
+
+    For an elementwise stencil the result is the whole call's, bit for bit.
+
+    Examples
+    --------
+    >>> a = np.arange(1000.0)
+    >>> out = np.empty(998)
+    >>> def mean3(lo, hi): return (a[lo:hi + 2][:-2] + a[lo:hi + 2][1:-1] + a[lo:hi + 2][2:]) / 3
+    >>> for_row_blocks_of(mean3, out, halo=0, min_rows=10)
+    >>> bool(np.array_equal(out, (a[:-2] + a[1:-1] + a[2:]) / 3))
+    True
+    """
+    rows = len(out)
+
+    def block(start: int, stop: int) -> None:
+        lo, hi = max(start - halo, 0), min(stop + halo, rows)
+        out[start:stop] = function(lo, hi)[start - lo: stop - lo]
+    for_row_blocks(block, rows, min_rows=min_rows)
+
+
 def beside(function, *args) -> Future:
     """Start ``function(*args)`` on the pool while the caller goes on.
 
