@@ -8,7 +8,8 @@
 A user runs one ``render`` per process: its kernels come from Dr.Jit's
 on-disk cache or are compiled, its imports and first allocations are part of
 the render.  Each process is set up as the command line sets up its own
-(:func:`mitsuba_mrt.runtime.configure`: malloc keeps freed memory for reuse).  Every round starts one process for the full render
+(:func:`mitsuba_mrt.runtime.configure`: malloc keeps freed memory for reuse).
+Every round starts one process for the full render
 (``render_reference``) and one per mode (``render(mode=...)``), in turn; each
 reports its render call's seconds (scene loading and imports left out: both
 pay them alike), and the mode's split into trace and the rest.  Printed per

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
 
+#: The names of the pool's threads begin with this.
+THREAD_PREFIX = "mitsuba-mrt"
 #: Threads the pool is limited to (:func:`use_threads`); None: one per core.
 _limit: list[int | None] = [None]
 
@@ -31,7 +34,7 @@ def cores() -> int:
 def _pool() -> tuple[ThreadPoolExecutor | None, int]:
     """The package's thread pool and its size (None: a single thread)."""
     workers = min(_limit[0] or cores(), 8)
-    return (ThreadPoolExecutor(workers, thread_name_prefix="mitsuba-mrt") if workers > 1
+    return (ThreadPoolExecutor(workers, thread_name_prefix=THREAD_PREFIX) if workers > 1
             else None), workers
 
 
@@ -62,7 +65,9 @@ def for_row_blocks(function, rows: int, min_rows: int = 512,
     """Call ``function(start, stop)`` on contiguous blocks covering ``range(rows)``.
 
     One block per core, on threads, when ``rows >= min_rows`` and there is
-    more than one core; else one call on the calling thread.  ``function``
+    more than one core; else, and on one of the pool's own threads (work
+    started :func:`beside` the caller, which would otherwise wait on blocks
+    queued behind it), one call on the calling thread.  ``function``
     must only write rows ``start:stop`` of its output.  The blocks hold equal
     numbers of rows, or, with ``upper_triangle``, equal areas of the upper
     triangle of a square matrix (row ``i`` costing ``rows - i``).
@@ -76,7 +81,7 @@ def for_row_blocks(function, rows: int, min_rows: int = 512,
     True
     """
     pool, workers = _pool()
-    if pool is None or rows < min_rows:
+    if pool is None or rows < min_rows or _on_pool_thread():
         function(0, rows)
         return
     share = np.linspace(0.0, 1.0, workers + 1)
@@ -86,6 +91,11 @@ def for_row_blocks(function, rows: int, min_rows: int = 512,
     function(cuts[-2], cuts[-1])  # the last block on the calling thread
     for future in futures:
         future.result()
+
+
+def _on_pool_thread() -> bool:
+    """Whether the calling thread is one of the pool's."""
+    return threading.current_thread().name.startswith(THREAD_PREFIX)
 
 
 #: Fewest rows :func:`for_row_blocks_of` splits by default: a smaller grid's
@@ -104,11 +114,14 @@ def for_row_blocks_of(function, out: np.ndarray, halo: int = 1,
 
     Examples
     --------
-    >>> a = np.arange(1000.0)
-    >>> out = np.empty(998)
-    >>> def mean3(lo, hi): return (a[lo:hi + 2][:-2] + a[lo:hi + 2][1:-1] + a[lo:hi + 2][2:]) / 3
-    >>> for_row_blocks_of(mean3, out, halo=0, min_rows=10)
-    >>> bool(np.array_equal(out, (a[:-2] + a[1:-1] + a[2:]) / 3))
+    >>> a = np.arange(1000.0) ** 2
+    >>> def second_difference(lo, hi):
+    ...     d = np.zeros(hi - lo)
+    ...     d[1:-1] = a[lo:hi - 2] - 2 * a[lo + 1:hi - 1] + a[lo + 2:hi]
+    ...     return d
+    >>> out = np.empty(1000)
+    >>> for_row_blocks_of(second_difference, out, halo=1, min_rows=10)
+    >>> bool(np.array_equal(out, second_difference(0, 1000)))
     True
     """
     rows = len(out)
