@@ -17,7 +17,7 @@ from scipy import ndimage
 
 from ..errors import MRTError
 from .sampling import SamplePattern
-from ..runtime.threads import for_row_blocks
+from ..runtime.threads import for_row_blocks_of
 
 
 def quadtree_fill(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
@@ -408,20 +408,14 @@ def _blurred_mask(mask: np.ndarray, weights: np.ndarray) -> np.ndarray:
     the blur of the whole mask.
     """
     reach = len(weights) // 2
-    rows = mask.shape[0]
     out = np.empty(mask.shape, dtype=np.float32)
     source = mask.view(np.uint8)
+    if out.size < PARALLEL_AREA:  # in place, on this thread
+        ndimage.correlate1d(source, weights, 0, out)
+        return ndimage.correlate1d(out, weights, 1, out)
 
-    def blur(a, b):
-        lo, hi = max(a - reach, 0), min(b + reach, rows)
-        if lo == a and hi == b:  # the whole mask
-            ndimage.correlate1d(source, weights, 0, out)
-        else:
-            out[a:b] = ndimage.correlate1d(source[lo:hi], weights, 0, np.float32)[a - lo:b - lo]
-        ndimage.correlate1d(out[a:b], weights, 1, out[a:b])
-
-    if out.size < PARALLEL_AREA:
-        blur(0, rows)
-    else:
-        for_row_blocks(blur, rows, min_rows=8 * reach)
+    def blur(lo, hi):
+        block = ndimage.correlate1d(source[lo:hi], weights, 0, np.float32)
+        return ndimage.correlate1d(block, weights, 1, block)
+    for_row_blocks_of(blur, out, halo=reach, min_rows=8 * reach)
     return out

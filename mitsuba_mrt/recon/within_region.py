@@ -460,10 +460,10 @@ class GridValues:
         values = self.unscaled(values)
         return values if values.shape[-1] == 3 else values[:, :3] * values[:, 3:]
 
-    def radiance(self, interpolated: np.ndarray, parallel: bool = True) -> np.ndarray:
+    def radiance(self, interpolated: np.ndarray) -> np.ndarray:
         """float64 radiance (height, width, 3) of interpolated scaled radiance
         (C = 3), or irradiance and albedo (C = 6); in row blocks on all cores
-        with ``parallel`` (not from a task of the pool itself)."""
+        (on one, called from a task of the pool itself)."""
         height, width, channels = interpolated.shape
         out = np.empty((height, width, 3))
         # the scales tiled along a row: numpy broadcasts a (3,) operand slowly
@@ -480,10 +480,7 @@ class GridValues:
                             dtype=np.float64)
                 flat *= tiled
 
-        if parallel:
-            for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
-        else:
-            rows(0, height)
+        for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
         return out
 
 
@@ -555,8 +552,8 @@ def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.n
     grid = GridValues.from_samples(pattern, grid_ids, values)
     counts["fireflies"] = grid.fireflies
     early = early_values(pattern, grid_ids, grid.values)
-    # on the pool's worker already (beside the ids): no nested row blocks
-    return grid, constant, counts, early, grid.radiance(early.image, parallel=False)
+    # (on the pool's worker, beside the ids: its row blocks run on this thread)
+    return grid, constant, counts, early, grid.radiance(early.image)
 
 
 def black_background(sample_ids: np.ndarray, radiance: np.ndarray, counts: Counter,
