@@ -22,7 +22,7 @@ import mitsuba as mi
 import numpy as np
 
 from .lanes import is_jit, logical_not
-from .pixel_filter import filter_table
+from .pixel_filter import GUIDE_BINS, filter_table
 from .replay import Replay
 from .scene_query import has_delta_lobes
 
@@ -212,21 +212,22 @@ def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
 ALIGNMENT = 64
 
 
-def _aligned_float(values: np.ndarray):
-    """``values`` as a Dr.Jit ``Float`` over a float32 copy aligned to :data:`ALIGNMENT`.
+def _aligned_float(values: np.ndarray, dtype=np.float32):
+    """``values`` as a Dr.Jit ``Float`` (``UInt32`` for ``dtype`` uint32) over
+    a copy aligned to :data:`ALIGNMENT`.
 
     Dr.Jit maps a NumPy array's memory instead of copying it, and a frozen
     call (:mod:`.replay`) is recorded anew whenever an input's memory turns
     from aligned to unaligned or back: NumPy's buffers are aligned or not by
     chance, so the same trace was recorded again on some renders.
     """
-    values = np.asarray(values, dtype=np.float32).ravel()
+    values = np.asarray(values, dtype=dtype).ravel()
     slack = ALIGNMENT // values.itemsize
-    buffer = np.empty(len(values) + slack, dtype=np.float32)
+    buffer = np.empty(len(values) + slack, dtype=dtype)
     start = (-buffer.ctypes.data % ALIGNMENT) // values.itemsize
     out = buffer[start:start + len(values)]
     out[...] = values
-    return mi.Float(out)
+    return (mi.UInt32 if dtype == np.uint32 else mi.Float)(out)
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
@@ -262,14 +263,17 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
            and not table.negative and albedo_samples > 0 else 0)
     read = _read_channels(integrator is not None, bool(albedo), bool(normals), bool(halves),
                           bool(few))
+    first, steps = table.guide()
+    steps = None if table.uniform else steps
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,
               tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
-              float(table.radius), len(table.pdf), bool(box),
+              float(table.radius), len(table.pdf), steps, bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
               bool(albedo and normals), few)
     sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
                     _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
+                    _aligned_float(first, np.uint32),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if splat:  # the block holds the channels read, in order; the others are zero
@@ -285,7 +289,39 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
                      bool(albedo and normals), bool(few))
 
 
-def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_input,
+def filter_cell(u, cdf, first, steps: int, cells: int):
+    """The cell of the tabulated filter distribution that uniform numbers ``u``
+    (a Dr.Jit ``Float`` in [0, 1)) fall in: the first ``k`` with
+    ``cdf[k + 1] > u`` (the last cell where there is none), as a bisection
+    of the whole table finds it, bisected within the ``steps + 1`` cells that
+    the guide table ``first`` leaves (:meth:`.pixel_filter.FilterTable.guide`).
+    """
+    k = dr.gather(mi.UInt32, first, dr.minimum(mi.UInt32(u * GUIDE_BINS), GUIDE_BINS - 1))
+    candidates = steps + 1
+    while candidates > 1:  # the answer lies in [k, k + candidates - 1]
+        half = candidates // 2
+        k = dr.select(dr.gather(mi.Float, cdf, dr.minimum(k + half, cells)) <= u, k + half, k)
+        candidates -= half
+    return dr.minimum(k, cells - 1)
+
+
+def filter_offset(u, cdf, first, steps: int | None, cells: int, radius: float):
+    """Offsets from a pixel's centre with density ``|f|`` (the tabulated
+    filter's inverse CDF) for uniform numbers ``u`` in [0, 1): within the
+    cell :func:`filter_cell` finds, linearly.  ``steps`` None: the table is
+    uniform (a box filter), where ``u`` lies ``u * cells`` cells in, exactly
+    as the search and the interpolation would find it.
+    """
+    cell = 2.0 * radius / cells
+    if steps is None:
+        return -radius + (u * cells) * cell
+    k = filter_cell(u, cdf, first, steps, cells)
+    lo, hi = dr.gather(mi.Float, cdf, k), dr.gather(mi.Float, cdf, k + 1)
+    t = dr.select(hi > lo, (u - lo) / (hi - lo), 0.5)
+    return -radius + (mi.Float(k) + t) * cell
+
+
+def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, seed, spp_input,
                     layout):
     """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
     per pixel (a list of channels) or, splatted over every pixel through the
@@ -302,21 +338,17 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, seed, spp_
     a second kernel over every lane to write back.
     """
     (n, spp, _, albedo, every, splat, width, height, crop_offset, sample_border, radius, cells,
-     box, bounces, halves, normals, few) = layout
+     steps, box, bounces, halves, normals, few) = layout
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
-    cell = 2.0 * radius / cells
     sampler = sensor.sampler().clone()
     sampler.set_sample_count(spp)
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n * spp)
     owner = dr.arange(mi.UInt32, n * spp) // spp_input  # lanes pixel-major, as Mitsuba's own
 
-    def offset(u):  # inverse CDF of the tabulated |filter|
-        k = dr.binary_search(0, cells - 1, lambda i: dr.gather(mi.Float, cdf, i + 1) <= u)
-        lo, hi = dr.gather(mi.Float, cdf, k), dr.gather(mi.Float, cdf, k + 1)
-        t = dr.select(hi > lo, (u - lo) / (hi - lo), 0.5)
-        return -radius + (mi.Float(k) + t) * cell
+    def offset(u):
+        return filter_offset(u, cdf, first, steps, cells, radius)
 
     u = sampler.next_2d()
     pixel = mi.Point2f(dr.gather(mi.Float, pixel_x, owner), dr.gather(mi.Float, pixel_y, owner))

@@ -21,6 +21,9 @@ import numpy as np
 
 #: Cells of the tabulated filter distribution over [-radius, radius].
 TABLE_CELLS = 512
+#: Bins of :meth:`FilterTable.guide` over [0, 1): a sample's cell is found
+#: from its bin's first cell in a step or two, not by bisecting all cells.
+GUIDE_BINS = 4096
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,33 @@ class FilterTable:
         mass = self.cdf[k + 1] - self.cdf[k]
         inside = np.where(mass > 0, (u - self.cdf[k]) / np.where(mass > 0, mass, 1.0), 0.5)
         return -self.radius + (k + inside) * self.cell
+
+    @property
+    def uniform(self) -> bool:
+        """Whether every cell has the same mass (a box filter): a cell's
+        ``cdf[k]`` is then ``k / cells``, and ``u`` lies ``u * cells`` cells in."""
+        return bool(np.all(self.pdf == self.pdf[0]))
+
+    def guide(self, bins: int = GUIDE_BINS) -> tuple[np.ndarray, int]:
+        """A guide table for finding a uniform number's cell: (first, steps).
+
+        ``first[j]`` is the cell of ``u = j / bins`` (the first ``k`` with
+        ``cdf[k + 1] > u``, compared in float32 as a kernel compares them; the
+        last cell where there is none); the cell of any ``u`` in
+        ``[j / bins, (j + 1) / bins)`` is ``first[j]`` plus at most ``steps``
+        (each a step past one more cell whose ``cdf[k + 1] <= u``): the cell
+        a bisection of the whole table finds, for a few lookups.
+
+        Examples
+        --------
+        >>> first, steps = FilterTable.from_values(0.5, np.ones(4)).guide(8)
+        >>> first.tolist(), steps
+        ([0, 0, 1, 1, 2, 2, 3, 3, 3], 1)
+        """
+        cdf = np.asarray(self.cdf, dtype=np.float32)
+        u = (np.arange(bins + 1) / bins).astype(np.float32)
+        first = np.minimum(np.searchsorted(cdf[1:], u, side="right"), len(self.pdf) - 1)
+        return first.astype(np.uint32), int(np.diff(first).max(initial=0))
 
     @classmethod
     def from_values(cls, radius: float, values: np.ndarray) -> "FilterTable":
