@@ -95,6 +95,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
+    if int(spp) < 1:  # a kernel would divide by it: the process dies of SIGFPE
+        raise MRTError(f"spp must be >= 1, got {spp}")
     pixel_xy = np.asarray(pixel_xy, dtype=np.int64)
     n = len(pixel_xy)
     if n == 0 and is_jit():  # Dr.Jit aborts the process on a launch of no lanes

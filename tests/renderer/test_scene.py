@@ -71,3 +71,14 @@ def test_a_jit_variant_loads_the_scene_on_one_thread(variant, tmp_path, monkeypa
     monkeypatch.setattr(mi, "load_file", lambda *a, **k: calls.append(k) or load_file(*a, **k))
     scene_module.load_scene(path)
     assert calls[0]["parallel"] is variant.startswith("scalar")
+
+
+def test_a_trace_of_no_samples_is_refused_not_launched(variant):
+    # a kernel divides by the spp: a launch of 0 spp would end the process
+    import numpy as np
+
+    from mitsuba_mrt.renderer.trace import trace_pixels
+
+    scene = mi.load_string(small_scene_xml())
+    with pytest.raises(MRTError, match="spp must be >= 1, got 0"):
+        trace_pixels(scene, scene.sensors()[0], scene.integrator(), np.zeros((1, 2), int), 0)
