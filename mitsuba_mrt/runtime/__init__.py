@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-from .allocator import keep_freed_memory
+from .allocator import keep_freed_memory, no_huge_pages
 
 #: OpenBLAS's idle-thread timeout set by :func:`configure` (2**16 cycles,
 #: about 20 us): short enough that idle BLAS threads sleep before the next
@@ -27,13 +27,18 @@ def configure() -> dict[str, bool]:
       (:func:`mitsuba_mrt.runtime.allocator.keep_freed_memory`); skipped
       with ``MITSUBA_MRT_MALLOC=system`` or glibc's own ``MALLOC_*_``
       variables.
+    * NumPy advises no transparent huge pages for its large arrays
+      (:func:`mitsuba_mrt.runtime.allocator.no_huge_pages`: a first write
+      to one could wait on the kernel's memory compaction); skipped with
+      ``MITSUBA_MRT_MALLOC=system`` or ``NUMPY_MADVISE_HUGEPAGE``.
 
     Examples
     --------
     >>> sorted(configure())
-    ['malloc', 'openblas_timeout']
+    ['huge_pages_off', 'malloc', 'openblas_timeout']
     """
     timeout = "OPENBLAS_THREAD_TIMEOUT" not in os.environ
     if timeout:
         os.environ["OPENBLAS_THREAD_TIMEOUT"] = OPENBLAS_THREAD_TIMEOUT
-    return {"openblas_timeout": timeout, "malloc": keep_freed_memory()}
+    return {"openblas_timeout": timeout, "malloc": keep_freed_memory(),
+            "huge_pages_off": no_huge_pages()}

@@ -1,4 +1,4 @@
-"""glibc's malloc, set to keep the reconstructions' freed memory for reuse.
+"""The process's memory: glibc's malloc keeps freed memory, NumPy asks for no huge pages.
 
 A reconstruction allocates and frees tens of large temporaries (about
 100 MB at 1000 x 1000).  With glibc's default, adaptive thresholds much of
@@ -11,6 +11,16 @@ freed memory stays mapped for the next allocation.
 It does nothing when ``MITSUBA_MRT_MALLOC=system`` is set, when one of
 glibc's own ``MALLOC_*_`` tuning variables is (the user tuned malloc), or
 when the C library is not glibc.
+
+NumPy advises the kernel to back arrays of 4 MB or more with transparent
+huge pages.  Where the kernel grants them on advice and compacts memory to
+find them (``transparent_hugepage/defrag`` set to ``madvise``, a common
+default), the first write to such an array may wait for that compaction,
+for a time that depends on the machine's memory, not on the work: a fresh
+process's large reconstructions (the id pass's full-resolution arrays) took
+longer, and by varying amounts.  :func:`no_huge_pages` turns the advice off
+(``MITSUBA_MRT_MALLOC=system`` or NumPy's own ``NUMPY_MADVISE_HUGEPAGE``
+keep it).
 """
 
 from __future__ import annotations
@@ -52,3 +62,25 @@ def keep_freed_memory() -> bool:
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
     return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(
         mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
+def no_huge_pages() -> bool:
+    """Stop NumPy advising huge pages for its large arrays (see the module);
+    True if it did so before.
+
+    Examples
+    --------
+    >>> import os
+    >>> os.environ["NUMPY_MADVISE_HUGEPAGE"] = "1"
+    >>> no_huge_pages()
+    False
+    >>> del os.environ["NUMPY_MADVISE_HUGEPAGE"]
+    """
+    if os.environ.get("MITSUBA_MRT_MALLOC") == "system" or "NUMPY_MADVISE_HUGEPAGE" in os.environ:
+        return False
+    try:
+        from numpy._core import multiarray
+    except ImportError:  # NumPy 1
+        from numpy.core import multiarray
+    advise = getattr(multiarray, "_set_madvise_hugepage", None)
+    return bool(advise(False)) if advise is not None else False

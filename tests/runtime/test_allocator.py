@@ -29,3 +29,36 @@ def test_user_choices_are_kept(monkeypatch, name, value):
     monkeypatch.setattr(allocator.ctypes, "CDLL", lambda *a: called.append(a))
     assert allocator.keep_freed_memory() is False
     assert called == []  # the C library was not even opened
+
+
+def _advice():
+    try:
+        from numpy._core import multiarray
+    except ImportError:
+        from numpy.core import multiarray
+    return multiarray
+
+
+def test_numpy_stops_advising_huge_pages(monkeypatch):
+    monkeypatch.delenv("MITSUBA_MRT_MALLOC", raising=False)
+    monkeypatch.delenv("NUMPY_MADVISE_HUGEPAGE", raising=False)
+    multiarray = _advice()
+    before = multiarray._set_madvise_hugepage(True)
+    try:
+        assert allocator.no_huge_pages() is True
+        assert multiarray._get_madvise_hugepage() is False
+    finally:
+        multiarray._set_madvise_hugepage(before)
+
+
+@pytest.mark.parametrize("name,value", [("MITSUBA_MRT_MALLOC", "system"),
+                                        ("NUMPY_MADVISE_HUGEPAGE", "1")])
+def test_numpys_advice_is_left_where_the_user_chose(monkeypatch, name, value):
+    monkeypatch.setenv(name, value)
+    multiarray = _advice()
+    before = multiarray._set_madvise_hugepage(True)
+    try:
+        assert allocator.no_huge_pages() is False
+        assert multiarray._get_madvise_hugepage() is True
+    finally:
+        multiarray._set_madvise_hugepage(before)
