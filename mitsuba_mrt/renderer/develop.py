@@ -212,7 +212,7 @@ def _every_pixel(pixel_xy: np.ndarray, width: int, height: int) -> bool:
 ALIGNMENT = 64
 
 
-def _aligned_float(values: np.ndarray, dtype=np.float32):
+def _aligned(values: np.ndarray, dtype=np.float32):
     """``values`` as a Dr.Jit ``Float`` (``UInt32`` for ``dtype`` uint32) over
     a copy aligned to :data:`ALIGNMENT`.
 
@@ -271,9 +271,9 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
               float(table.radius), len(table.pdf), steps, bool(box),
               MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
               bool(albedo and normals), few)
-    sums = _DEVELOP(scene, sensor, integrator, _aligned_float(traced[:, 0]),
-                    _aligned_float(traced[:, 1]), _aligned_float(table.cdf),
-                    _aligned_float(first, np.uint32),
+    sums = _DEVELOP(scene, sensor, integrator, _aligned(traced[:, 0]),
+                    _aligned(traced[:, 1]), _aligned(table.cdf),
+                    _aligned(first, np.uint32),
                     dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if splat:  # the block holds the channels read, in order; the others are zero

@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .develop import MIRROR_DEPTH, _aligned_float, _camera_ray
+from .develop import MIRROR_DEPTH, _aligned, _camera_ray
 from .lanes import _to_numpy, is_jit, logical_not
 from .replay import Replay
 from .scene_query import _inner_lookup, has_mirrors
@@ -171,7 +171,7 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     n = len(pixel_xy)
     layout = (rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
     mask, pointers, inner, chain, normal, back = _IDS(
-        scene, sensor, lights, _aligned_float(pixel_xy[:, 0]), _aligned_float(pixel_xy[:, 1]),
+        scene, sensor, lights, _aligned(pixel_xy[:, 0]), _aligned(pixel_xy[:, 1]),
         layout, objects=(scene, sensor), record=replay)
     keys = lookup[0]
     shape_index = _to_index(pointers, n, lookup)
@@ -204,8 +204,8 @@ def shape_indices(scene, sensor, pixel_xy: np.ndarray, lookup, replay: bool) -> 
     if not is_jit():
         return _ids_scalar(scene, sensor, None, pixel_xy, [], lookup, "none")[0]
     layout = tuple(int(v) for v in sensor.film().crop_size())
-    pointers = _SHAPES(scene, sensor, _aligned_float(pixel_xy[:, 0]),
-                       _aligned_float(pixel_xy[:, 1]), layout, objects=(scene, sensor),
+    pointers = _SHAPES(scene, sensor, _aligned(pixel_xy[:, 0]),
+                       _aligned(pixel_xy[:, 1]), layout, objects=(scene, sensor),
                        record=replay)
     return _to_index(pointers, len(pixel_xy), lookup)
 

@@ -22,7 +22,8 @@ import numpy as np
 #: Cells of the tabulated filter distribution over [-radius, radius].
 TABLE_CELLS = 512
 #: Bins of :meth:`FilterTable.guide` over [0, 1): a sample's cell is found
-#: from its bin's first cell in a step or two, not by bisecting all cells.
+#: by bisecting the few cells its bin spans (one to six steps for Mitsuba's
+#: filters), not all :data:`TABLE_CELLS`.
 GUIDE_BINS = 4096
 
 

@@ -31,34 +31,29 @@ def test_user_choices_are_kept(monkeypatch, name, value):
     assert called == []  # the C library was not even opened
 
 
-def _advice():
+
+@pytest.fixture
+def advised():
+    """NumPy's huge-page advice, on for the test and restored after it."""
     try:
         from numpy._core import multiarray
     except ImportError:
         from numpy.core import multiarray
-    return multiarray
+    before = multiarray._set_madvise_hugepage(True)
+    yield multiarray._get_madvise_hugepage
+    multiarray._set_madvise_hugepage(before)
 
 
-def test_numpy_stops_advising_huge_pages(monkeypatch):
+def test_numpy_stops_advising_huge_pages(monkeypatch, advised):
     monkeypatch.delenv("MITSUBA_MRT_MALLOC", raising=False)
     monkeypatch.delenv("NUMPY_MADVISE_HUGEPAGE", raising=False)
-    multiarray = _advice()
-    before = multiarray._set_madvise_hugepage(True)
-    try:
-        assert allocator.no_huge_pages() is True
-        assert multiarray._get_madvise_hugepage() is False
-    finally:
-        multiarray._set_madvise_hugepage(before)
+    assert allocator.no_huge_pages() is True
+    assert advised() is False
 
 
 @pytest.mark.parametrize("name,value", [("MITSUBA_MRT_MALLOC", "system"),
                                         ("NUMPY_MADVISE_HUGEPAGE", "1")])
-def test_numpys_advice_is_left_where_the_user_chose(monkeypatch, name, value):
+def test_numpys_advice_is_left_where_the_user_chose(monkeypatch, advised, name, value):
     monkeypatch.setenv(name, value)
-    multiarray = _advice()
-    before = multiarray._set_madvise_hugepage(True)
-    try:
-        assert allocator.no_huge_pages() is False
-        assert multiarray._get_madvise_hugepage() is True
-    finally:
-        multiarray._set_madvise_hugepage(before)
+    assert allocator.no_huge_pages() is False
+    assert advised() is True
