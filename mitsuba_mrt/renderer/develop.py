@@ -263,7 +263,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
            and not table.negative and albedo_samples > 0 else 0)
     read = _read_channels(integrator is not None, bool(albedo), bool(normals), bool(halves),
                           bool(few))
-    first, steps = table.guide()
+    first, steps = table.guide
     steps = None if table.uniform else steps
     # what the kernels bake in, so that a recording is replayed only where it holds
     layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,

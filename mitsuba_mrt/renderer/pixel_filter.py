@@ -15,6 +15,7 @@ image are dropped, as ``mi.render`` never takes them.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,10 +74,13 @@ class FilterTable:
         ``cdf[k]`` is then ``k / cells``, and ``u`` lies ``u * cells`` cells in."""
         return bool(np.all(self.pdf == self.pdf[0]))
 
-    def guide(self, bins: int = GUIDE_BINS) -> tuple[np.ndarray, int]:
-        """A guide table for finding a uniform number's cell: (first, steps).
+    @functools.cached_property
+    def guide(self) -> tuple[np.ndarray, int]:
+        """A guide table for finding a uniform number's cell: (first, steps),
+        made once per table.
 
-        ``first[j]`` is the cell of ``u = j / bins`` (the first ``k`` with
+        With ``bins`` = :data:`GUIDE_BINS`, ``first[j]`` is the cell of
+        ``u = j / bins`` (the first ``k`` with
         ``cdf[k + 1] > u``, compared in float32 as a kernel compares them; the
         last cell where there is none); the cell of any ``u`` in
         ``[j / bins, (j + 1) / bins)`` is ``first[j]`` plus at most ``steps``
@@ -85,12 +89,12 @@ class FilterTable:
 
         Examples
         --------
-        >>> first, steps = FilterTable.from_values(0.5, np.ones(4)).guide(8)
-        >>> first.tolist(), steps
+        >>> first, steps = FilterTable.from_values(0.5, np.ones(4)).guide
+        >>> first[::GUIDE_BINS // 8].tolist(), steps
         ([0, 0, 1, 1, 2, 2, 3, 3, 3], 1)
         """
         cdf = np.asarray(self.cdf, dtype=np.float32)
-        u = (np.arange(bins + 1) / bins).astype(np.float32)
+        u = (np.arange(GUIDE_BINS + 1) / GUIDE_BINS).astype(np.float32)
         first = np.minimum(np.searchsorted(cdf[1:], u, side="right"), len(self.pdf) - 1)
         return first.astype(np.uint32), int(np.diff(first).max(initial=0))
 

@@ -232,15 +232,21 @@ def diffuse_shapes(scene: mi.Scene) -> np.ndarray:
     return np.array([False] + shows(scene, lambda shape: diffuse(shape.bsdf()), all), dtype=bool)
 
 
+def _delta_light(emitter) -> bool:
+    """Whether ``emitter`` is a point, spot or directional light (one
+    position, or one direction: no point or direction of it to sample)."""
+    return any(mi.has_flag(emitter.flags(), f)
+               for f in (mi.EmitterFlags.DeltaPosition, mi.EmitterFlags.DeltaDirection))
+
+
 def lit_diffuse_by_points(scene: mi.Scene) -> bool:
     """Whether every surface of ``scene`` is diffuse (:func:`diffuse_shapes`)
     and every emitter a point, spot or directional light: the report's
     scenes, where shading is smooth within a shape and every edge of light
     is a shadow the ids track."""
-    delta = (mi.EmitterFlags.DeltaPosition, mi.EmitterFlags.DeltaDirection)
     emitters = scene.emitters()
     return (len(emitters) > 0 and len(scene.shapes()) > 0
-            and all(any(mi.has_flag(e.flags(), f) for f in delta) for e in emitters)
+            and all(_delta_light(e) for e in emitters)
             and bool(diffuse_shapes(scene)[1:].all()))
 
 
@@ -258,9 +264,7 @@ def surely_noisy(scene: mi.Scene, integrator: mi.Integrator) -> bool:
     direction of it, so the pixel differs from one set of random numbers to
     another, and no probe is needed to tell the scene is noisy."""
     names = {integrator.class_name(), type(integrator).__name__}
-    delta = (mi.EmitterFlags.DeltaPosition, mi.EmitterFlags.DeltaDirection)
-    return bool(names & LIGHT_SAMPLING) and any(
-        not any(mi.has_flag(e.flags(), f) for f in delta) for e in scene.emitters())
+    return bool(names & LIGHT_SAMPLING) and not all(_delta_light(e) for e in scene.emitters())
 
 
 def environment_map(scene: mi.Scene) -> bool:

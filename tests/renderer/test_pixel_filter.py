@@ -26,7 +26,7 @@ def test_the_guide_table_finds_the_cell_a_bisection_of_the_whole_table_finds(var
     if not is_jit():
         pytest.skip("the kernels' search: JIT variants")
     table = filter_table(mi.load_dict({"type": name}))
-    first, steps = table.guide()
+    first, steps = table.guide
     cells = len(table.pdf)
     cdf = mi.Float(table.cdf.astype(np.float32))
     u = _uniform_numbers(table)
@@ -39,7 +39,7 @@ def test_the_guide_table_finds_the_cell_a_bisection_of_the_whole_table_finds(var
 
 
 def test_a_uniform_filters_guide_leaves_one_step():
-    first, steps = FilterTable.from_values(0.5, np.ones(8)).guide(64)
+    first, steps = FilterTable.from_values(0.5, np.ones(8)).guide
     assert steps == 1
     assert first[0] == 0 and first[-1] == 7
 
@@ -49,7 +49,7 @@ def test_a_box_filters_offsets_need_no_search_and_are_the_searched_ones_bit_for_
         pytest.skip("the kernels' search: JIT variants")
     table = filter_table(mi.load_dict({"type": "box"}))
     assert table.uniform and not filter_table(mi.load_dict({"type": "tent"})).uniform
-    first, steps = table.guide()
+    first, steps = table.guide
     u = mi.Float(_uniform_numbers(table))
     args = (mi.Float(table.cdf.astype(np.float32)), mi.UInt32(first))
     direct = filter_offset(u, *args, None, len(table.pdf), table.radius).numpy()
