@@ -61,6 +61,9 @@ class Candidate:
     shading : bool
         Whether OIDN saw the textured diffuse surfaces as their shading
         (``auto``'s passes).
+    fraction : float or None
+        The share of the pixels an ``mrt`` candidate's grid traces, where
+        the plan chose it (None: the render's ``sample_fraction``).
     """
 
     name: str
@@ -73,14 +76,18 @@ class Candidate:
     compile_s: float = 0.0
     quality: str | None = None
     shading: bool = False
+    fraction: float | None = None
 
     @property
     def label(self) -> str:
-        """``name`` with its spp (and what the plan chose of OIDN's):
-        ``full+oidn @ 4 spp``, ``full+oidn @ 32 spp, OIDN high, textures as shading``."""
+        """``name`` with its spp (and what the plan chose of OIDN's and of the
+        grid): ``full+oidn @ 4 spp``, ``full+oidn @ 32 spp, OIDN high, textures
+        as shading``, ``refine+oidn @ 32 spp, grid of 20 % of the pixels``."""
         return (f"{self.name} @ {self.spp} spp" + (f", OIDN {self.quality}" if self.quality
                                                    else "")
-                + (", textures as shading" if self.shading else ""))
+                + (", textures as shading" if self.shading else "")
+                + (f", grid of {100 * self.fraction:.3g} % of the pixels"
+                   if self.fraction is not None else ""))
 
 
 @dataclass

@@ -224,6 +224,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
                                     on_round=progress)
             outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
             return _passes_result(outcome, tracer, params, start)
+        if choice.fraction is not None:  # (the plan chose its grid)
+            pattern = grid_pattern(width, height, choice.fraction)
         if check:  # an MRT image chosen without a pilot: kept if its check says so
             result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=id_pass),
                           params.with_(denoise="oidn" if choice.denoise else "none"),

@@ -51,6 +51,7 @@ the check or the estimates that chose it: :func:`_again`):
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -177,6 +178,13 @@ SPECULAR_REASON = "mirrors or glass, no texture: the MRT's refined edges, denois
 #: bench's scenes where that image meets the target by the report's metric,
 #: the check's estimate is 0.5-1.3 times the noise.
 CHECK_SLACK = 1.5
+#: :data:`SKY`'s plans, and :data:`HOME`'s on scenes other than the report's
+#: kind, on images of fewer than :data:`WIDE_PIXELS`: the grid spreads the
+#: same samples over this many times the pixels (``sample_fraction``), at
+#: that share of the spp.  There the default grid's spacing is coarse beside
+#: the scene's detail, and ``refine`` traces its edges' pixels at the grid's
+#: spp (``examples/grid_spread.py``).
+SMALL_IMAGE_SPREAD = 2
 
 #: A pass of every pixel (1 spp, box filter, guides) over the preview's grid
 #: trace's kernel time scaled to as many pixels (that trace also follows
@@ -443,8 +451,29 @@ def _mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, note
             return None, traced
     id_pass = traced.id_pass  # (a trace of the image: not the plan's time)
     pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
-    return AutoOutcome(Plan(replace(chosen[0], spp=tracer.spp), chosen[1], pilot_s=pilot_s,
-                            notes=notes), check=True, id_pass=id_pass), traced
+    choice = spread(chosen[0], chosen[1], tracer.spp, params.sample_fraction, width * height)
+    return AutoOutcome(Plan(choice, chosen[1], pilot_s=pilot_s, notes=notes), check=True,
+                       id_pass=id_pass), traced
+
+
+def spread(chosen: Candidate, reason: str, spp: int, fraction: float,
+           pixels: int) -> Candidate:
+    """``chosen``, an MRT plan of :func:`unmeasured_plan` for ``reason``, at
+    the render's ``spp`` and grid ``fraction``; on an image of fewer than
+    :data:`WIDE_PIXELS` ``pixels`` of another kind than the report's, its
+    grid :data:`SMALL_IMAGE_SPREAD` times denser at as many times fewer spp.
+
+    Examples
+    --------
+    >>> spread(SKY, SKY_REASON, 64, 0.1, 256 * 256).label
+    'refine+oidn @ 32 spp, grid of 20 % of the pixels'
+    >>> spread(HOME, HOME_REASON, 64, 0.1, 256 * 256).label
+    'idpass+oidn @ 64 spp'
+    """
+    if pixels >= WIDE_PIXELS or reason == HOME_REASON:
+        return replace(chosen, spp=spp)
+    return replace(chosen, spp=max(1, math.ceil(spp / SMALL_IMAGE_SPREAD)),
+                   fraction=min(1.0, SMALL_IMAGE_SPREAD * fraction))
 
 
 def _edge_tested(scene, tracer, params: MRTParams, width: int, height: int,

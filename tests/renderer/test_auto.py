@@ -16,6 +16,7 @@ from mitsuba_mrt import MRTError, MRTParams
 from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
 from mitsuba_mrt.renderer import auto, kept_plans, pilot
+from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
 
 from helpers import SCENES
@@ -626,6 +627,7 @@ def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_lig
     # few edges between ids (the border's), and the check keeps the image
     result = mitsuba_mrt.render(checker)
     assert result.mode_used == "idpass" and result.auto.reason == auto.TEXTURED_REASON
+    assert result.auto.choice.label == "idpass+oidn @ 16 spp, grid of 20 % of the pixels"
     assert not result.auto.notes and np.isfinite(result.image).all()
     # the room's glass shows what lies behind it, which no id tells apart
     room = mitsuba_mrt.load_scene(gallery / "room.xml", res=128)
@@ -644,6 +646,15 @@ def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(
     result = mitsuba_mrt.render(box)
     assert result.auto.reason == auto.SPECULAR_REASON and result.mode_used == "refine"
     assert result.params.denoise == "oidn" and np.isfinite(result.image).all()
+    # below 512 x 512 the grid is twice as dense, at half the spp: the image is
+    # the mode's own at that grid and spp (same seed)
+    assert result.auto.choice.label == "refine+oidn @ 32 spp, grid of 20 % of the pixels"
+    assert result.spp == 32 and result.traced.grid == grid_pattern(192, 192, 0.2).count
+    same = mitsuba_mrt.render(box, mode="refine", denoise="oidn", spp=32, sample_fraction=0.2)
+    assert np.array_equal(result.image, same.image)
+    again = mitsuba_mrt.render(box)  # the kept plan, its grid with it
+    assert again.auto.reason.startswith(auto.SPECULAR_REASON) and again.auto.passes == []
+    assert again.auto.choice.fraction == 0.2 and np.array_equal(again.image, same.image)
     # from 512 x 512 on the id pass, as on any scene without an environment map
     assert auto.unmeasured_plan(box, 512 * 512) == (auto.HOME, auto.WIDE_REASON)
     # neither mirrors nor glass: the passes
