@@ -19,9 +19,11 @@ the check or the estimates that chose it: :func:`_again`):
    at an edge between ids;
    :data:`SKY` (mode ``refine``, its grid denoised) under an environment
    map and on smaller images without one where a surface mirrors or
-   transmits light and none is textured.  The image is kept where its
-   held-out check (:mod:`.held_out`, :func:`keeps`) finds it near a full
-   render's quality, else the passes render the image after it.  Under a
+   transmits light and none is textured.  Below :data:`WIDE_PIXELS` pixels
+   every such plan but the report's kind's traces a denser grid at fewer spp
+   (:func:`spread`).  The image is kept where its held-out check
+   (:mod:`.held_out`, :func:`keeps`) finds it near a full render's quality,
+   else the passes render the image after it.  Under a
    time limit (OIDN installed, at least :data:`HOME_MIN_SPP` spp) such a
    plan, unchecked, where the process's earlier renders of the scene kept it,
    at the most spp expected to end within the limit (:func:`_measured_within`,
