@@ -29,7 +29,7 @@ def configure() -> dict[str, bool]:
       variables.
     * NumPy advises no transparent huge pages for its large arrays
       (:func:`mitsuba_mrt.runtime.allocator.no_huge_pages`: a first write
-      to one could wait on the kernel's memory compaction); skipped with
+      to one could wait on the kernel finding a huge page); skipped with
       ``MITSUBA_MRT_MALLOC=system`` or ``NUMPY_MADVISE_HUGEPAGE``.
 
     Examples

@@ -13,12 +13,12 @@ glibc's own ``MALLOC_*_`` tuning variables is (the user tuned malloc), or
 when the C library is not glibc.
 
 NumPy advises the kernel to back arrays of 4 MB or more with transparent
-huge pages.  Where the kernel grants them on advice and compacts memory to
-find them (``transparent_hugepage/defrag`` set to ``madvise``, a common
-default), the first write to such an array may wait for that compaction,
-for a time that depends on the machine's memory, not on the work: a fresh
-process's large reconstructions (the id pass's full-resolution arrays) took
-longer, and by varying amounts.  :func:`no_huge_pages` turns the advice off
+huge pages.  Where the kernel grants them on advice
+(``transparent_hugepage/enabled`` set to ``madvise``, a common default),
+the first write to such an array waits while the kernel finds and clears a
+huge page, for a time that depends on the machine's memory, not on the
+work: a fresh process's large reconstructions (the id pass's
+full-resolution arrays) took longer, and by varying amounts.  :func:`no_huge_pages` turns the advice off
 (``MITSUBA_MRT_MALLOC=system`` or NumPy's own ``NUMPY_MADVISE_HUGEPAGE``
 keep it).
 """
