@@ -111,6 +111,13 @@ PROBE_SIDE = 16
 #: reconstructed.
 PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
 PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
+#: The note of a preview taken where a pass could be planned only at an spp
+#: traced before in the process (``{}``), as the sampler bakes its spp into
+#: its kernels: a pass of 1 spp would record kernels whose compilation, where
+#: Dr.Jit's disk cache lacks them, no probe tells.
+BAKED_NOTE = ("the sampler bakes its sample count into its kernels: a pass at 1 spp, never "
+              "launched in this process, might compile them for seconds, and the cheapest "
+              "launched, at {} spp, does not fit")
 #: How far one pass and OIDN may end past a time limit before the preview is
 #: taken instead: the preview's error is several times a pass's, and a limit
 #: is held to within 10 %.
@@ -540,6 +547,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         if due:  # (the next render asks the launches' line or a probe)
             _first_round_s.pop(key, None)
+            _note_baked(launches, notes)
         return (AutoOutcome(preview) if due else None), None, False
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
     grid, pass_s = probed.grid, probed.pass_s
@@ -556,11 +564,24 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
                             params.denoise_quality)
     if due():
+        _note_baked(launches, notes)
         return AutoOutcome(preview, grid=grid), None, False
     # the passes' textured pixels, then the same question with their time spent
     surfaces = _surfaces(scene, tracer, width, height,
                          None if traced is None else traced.shape_index())
-    return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
+    if not due():
+        return None, surfaces, True
+    _note_baked(launches, notes)
+    return AutoOutcome(preview, grid=grid), surfaces, True
+
+
+def _note_baked(launches: LaunchCost | None, notes: list) -> None:
+    """Say why a preview was taken (:data:`BAKED_NOTE`) where the passes'
+    ``launches`` planned a pass only at an spp above 1 that they traced before."""
+    if launches is not None and launches.spp_compiles and launches.launches:
+        cheapest = launches.cheapest()
+        if cheapest > 1:
+            notes.append(BAKED_NOTE.format(cheapest))
 
 
 def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params: MRTParams,

@@ -1119,3 +1119,23 @@ def test_a_preview_leaves_its_later_stages_what_the_last_previews_took(scene, mo
     # previews whose stages after the grid filled the limit: no launch pooled
     auto._preview_after_s[key] = [9.5, 9.6, 0.0]
     assert mitsuba_mrt.render(scene, time_limit=10.0).spp == 1
+
+
+def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypatch):
+    from mitsuba_mrt.renderer import progressive
+
+    monkeypatch.setattr(auto, "_launch_costs", {})
+    monkeypatch.setattr(auto, "_first_round_s", {})
+    scene = mi.load_string(scene_xml(64, spp=16, sampler="stratified"))
+    assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
+    (key,) = auto._launch_costs  # passes launched only at 9 spp before, as a kept plan's
+    cost = auto._launch_costs[key] = progressive.LaunchCost([(9, 0.2, False)],
+                                                            spp_compiles=True)
+    assert cost(1) == math.inf and cost.cheapest() == 9
+    auto._first_round_s.clear()
+    preview = mitsuba_mrt.render(scene, time_limit=1e-6)
+    assert preview.auto.reason == auto.PREVIEW_REASON
+    assert auto.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes
+    # an independent sampler plans a pass of any spp: no such note
+    plain = mitsuba_mrt.render(mi.load_string(scene_xml(64, spp=16)), time_limit=1e-6)
+    assert not any("bakes" in note for note in plain.auto.notes)
