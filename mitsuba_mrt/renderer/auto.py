@@ -357,6 +357,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         outcome, surfaces, found = _preview_first(scene, pattern, tracer, params, started, key,
                                                   notes, probed, traced)
         if outcome is not None:
+            _note_baked(_launch_costs.get(key), notes)
             return _filled_preview(outcome, pattern, tracer, params, started, key)
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, traced.shape_index())
@@ -547,7 +548,6 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
         if due:  # (the next render asks the launches' line or a probe)
             _first_round_s.pop(key, None)
-            _note_baked(launches, notes)
         return (AutoOutcome(preview) if due else None), None, False
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
     grid, pass_s = probed.grid, probed.pass_s
@@ -564,20 +564,17 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
                             params.denoise_quality)
     if due():
-        _note_baked(launches, notes)
         return AutoOutcome(preview, grid=grid), None, False
     # the passes' textured pixels, then the same question with their time spent
     surfaces = _surfaces(scene, tracer, width, height,
                          None if traced is None else traced.shape_index())
-    if not due():
-        return None, surfaces, True
-    _note_baked(launches, notes)
-    return AutoOutcome(preview, grid=grid), surfaces, True
+    return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
 
 
 def _note_baked(launches: LaunchCost | None, notes: list) -> None:
-    """Say why a preview was taken (:data:`BAKED_NOTE`) where the passes'
-    ``launches`` planned a pass only at an spp above 1 that they traced before."""
+    """Say why the preview was taken (:data:`BAKED_NOTE`) where the passes'
+    ``launches`` (:data:`_launch_costs`) plan a pass only at an spp above 1
+    that they traced before."""
     if launches is not None and launches.spp_compiles and launches.launches:
         cheapest = launches.cheapest()
         if cheapest > 1:
