@@ -5,7 +5,9 @@ A reconstruction allocates and frees tens of large temporaries (about
 that memory goes back to the kernel when it is freed, and the next call
 faults it in again, page by page.  :func:`keep_freed_memory` fixes the
 thresholds instead (``mallopt``), so that up to :data:`TRIM_THRESHOLD` of
-freed memory stays mapped for the next allocation.
+freed memory stays mapped for the next allocation, and grows the heap
+:data:`TOP_PAD` beyond each allocation that needs more, so that a fresh
+process's first reconstruction extends it a few times, not once per array.
 :func:`mitsuba_mrt.runtime.configure` calls it; importing the package does not.
 
 It does nothing when ``MITSUBA_MRT_MALLOC=system`` is set, when one of
@@ -32,14 +34,17 @@ import os
 MMAP_THRESHOLD = 64 << 20
 #: Freed memory at the top of the heap beyond this size goes back to the kernel.
 TRIM_THRESHOLD = 256 << 20
+#: The heap grows by this much more than an allocation needs.
+TOP_PAD = 64 << 20
 
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # mallopt's parameter numbers (malloc.h)
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3  # mallopt's parameter numbers (malloc.h)
 _USER_TUNING = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_",
                 "MALLOC_MMAP_MAX_")
 
 
 def keep_freed_memory() -> bool:
-    """Set glibc's mmap and trim thresholds (see the module); True if they were set.
+    """Set glibc's mmap and trim thresholds and its top pad (see the module);
+    True if they were set.
 
     Examples
     --------
@@ -60,8 +65,9 @@ def keep_freed_memory() -> bool:
     except (AttributeError, OSError, ValueError):  # not glibc, or no confstr name here
         return False
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
-    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(
-        mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+    return all(mallopt(parameter, value) for parameter, value in (
+        (_M_MMAP_THRESHOLD, MMAP_THRESHOLD), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD),
+        (_M_TOP_PAD, TOP_PAD)))
 
 
 def no_huge_pages() -> bool:

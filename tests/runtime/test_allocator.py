@@ -20,6 +20,26 @@ def test_thresholds_are_set_on_glibc(monkeypatch):
     assert allocator.keep_freed_memory() is True
 
 
+def test_the_thresholds_and_the_top_pad_go_to_mallopt(monkeypatch):
+    monkeypatch.delenv("MITSUBA_MRT_MALLOC", raising=False)
+    for name in allocator._USER_TUNING:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(allocator.os, "confstr", lambda name: "glibc 2.36")
+    calls = {}
+
+    class Mallopt:  # (a C function: its argument types are set on it)
+        def __call__(self, parameter, value):
+            calls[parameter] = value
+            return 1
+
+    libc = type("Libc", (), {"mallopt": Mallopt()})()
+    monkeypatch.setattr(allocator.ctypes, "CDLL", lambda *a: libc)
+    assert allocator.keep_freed_memory() is True
+    # M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD (malloc.h)
+    assert calls == {-1: allocator.TRIM_THRESHOLD, -2: allocator.TOP_PAD,
+                     -3: allocator.MMAP_THRESHOLD}
+
+
 @pytest.mark.parametrize("name,value", [("MITSUBA_MRT_MALLOC", "system"),
                                         ("MALLOC_TRIM_THRESHOLD_", "1000000"),
                                         ("MALLOC_MMAP_THRESHOLD_", "65536")])
