@@ -24,6 +24,7 @@ def configure() -> dict[str, bool]:
     * ``OPENBLAS_THREAD_TIMEOUT`` (unless already set): OpenBLAS reads it
       when it is loaded, so this reaches only BLAS libraries loaded later.
     * glibc's malloc keeps up to 256 MB of freed memory mapped for reuse
+      and grows its heap in 64 MB steps
       (:func:`mitsuba_mrt.runtime.allocator.keep_freed_memory`); skipped
       with ``MITSUBA_MRT_MALLOC=system`` or glibc's own ``MALLOC_*_``
       variables.
