@@ -42,6 +42,13 @@ _USER_TUNING = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_
                 "MALLOC_MMAP_MAX_")
 
 
+def _user_chose(variables: tuple) -> bool:
+    """Whether the user keeps the process's memory as it is:
+    ``MITSUBA_MRT_MALLOC=system``, or one of ``variables`` (the tuning's own) set."""
+    return (os.environ.get("MITSUBA_MRT_MALLOC") == "system"
+            or any(name in os.environ for name in variables))
+
+
 def keep_freed_memory() -> bool:
     """Set glibc's mmap and trim thresholds and its top pad (see the module);
     True if they were set.
@@ -54,9 +61,7 @@ def keep_freed_memory() -> bool:
     False
     >>> del os.environ["MITSUBA_MRT_MALLOC"]
     """
-    if os.environ.get("MITSUBA_MRT_MALLOC") == "system":
-        return False
-    if any(name in os.environ for name in _USER_TUNING):
+    if _user_chose(_USER_TUNING):
         return False
     try:
         if not os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc"):
@@ -82,7 +87,7 @@ def no_huge_pages() -> bool:
     False
     >>> del os.environ["NUMPY_MADVISE_HUGEPAGE"]
     """
-    if os.environ.get("MITSUBA_MRT_MALLOC") == "system" or "NUMPY_MADVISE_HUGEPAGE" in os.environ:
+    if _user_chose(("NUMPY_MADVISE_HUGEPAGE",)):
         return False
     try:
         from numpy._core import multiarray
