@@ -133,6 +133,16 @@ def _check_spp(spp: int | None) -> int | None:
     return None if spp is None else int(spp)
 
 
+def _spp_of(spp: int | None, sensor) -> int:
+    """``spp`` where given, else the sensor's sampler's ``sample_count`` (each >= 1)."""
+    if spp is not None:
+        return _check_spp(spp)
+    count = int(sensor.sampler().sample_count())
+    if count < 1:  # (a kernel would divide by it: the process would die of SIGFPE)
+        raise MRTError(f"the scene's sampler takes sample_count >= 1, got {count}")
+    return count
+
+
 def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0,
            spp: int | None = None, seed: int = 0, params: MRTParams | None = None,
            mode: str | None = None, progress=None, **param_overrides) -> MRTResult:
@@ -199,7 +209,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
     sensor = resolve_sensor(scene, sensor)
-    spp = _check_spp(spp) or int(sensor.sampler().sample_count())
+    spp = _spp_of(spp, sensor)
     width, height = (int(v) for v in sensor.film().crop_size())
     tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
     plan, pattern, grid, check, id_pass, preview_key = None, None, None, False, None, None
@@ -320,7 +330,7 @@ def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
     """
     start = time.perf_counter()
     sensor = resolve_sensor(scene, sensor)
-    spp = _check_spp(spp) or int(sensor.sampler().sample_count())
+    spp = _spp_of(spp, sensor)
     tracer = GridTracer(scene, sensor, unwrap(scene, integrator).nested, spp, seed)
     width, height = (int(v) for v in sensor.film().crop_size())
     xy = every_pixel(width, height)
@@ -369,8 +379,10 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
     ``seconds`` is the whole call, as a user pays it (and as ``render``'s
     ``total`` is timed), the check for NaN and Inf included.
     """
-    image, _, seconds = _full_render(scene, unwrap(scene, integrator).nested,
-                                     resolve_sensor(scene, sensor), _check_spp(spp), seed)
+    sensor = resolve_sensor(scene, sensor)
+    _spp_of(spp, sensor)  # (None still: mi.render takes the sampler's own count)
+    image, _, seconds = _full_render(scene, unwrap(scene, integrator).nested, sensor,
+                                     _check_spp(spp), seed)
     return image, seconds
 
 

@@ -75,6 +75,9 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "-D", "res"], "name=value"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),
     (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "spp must be >= 1"),
+    # the scene's own sampler at 0 samples: a kernel would divide by it (SIGFPE)
+    (["render", SCENES / "gallery" / "cornell.xml", "-D", "spp=0"],
+     "the scene's sampler takes sample_count >= 1, got 0"),
     (["render", SCENES / "paper_fraction.xml", "--mode", "magic"], "unknown mode"),
     # Mitsuba's list of unused parameters is on the lines after its first
     (["render", SCENES / "paper_fraction.xml", "-D", "foo=1", "-D", "bar=2"],

@@ -82,3 +82,18 @@ def test_a_trace_of_no_samples_is_refused_not_launched(variant):
     scene = mi.load_string(small_scene_xml())
     with pytest.raises(MRTError, match="spp must be >= 1, got 0"):
         trace_pixels(scene, scene.sensors()[0], scene.integrator(), np.zeros((1, 2), int), 0)
+
+
+def test_a_scene_whose_sampler_takes_no_samples_is_refused(variant):
+    # mi.load_string takes sample_count 0; a render of it would end the process
+    import mitsuba_mrt
+
+    scene = mi.load_dict({"type": "scene", "shape": {"type": "sphere"},
+                          "sensor": {"type": "perspective",
+                                     "sampler": {"type": "independent", "sample_count": 0},
+                                     "film": {"type": "hdrfilm", "width": 8, "height": 8}}})
+    for call in (mitsuba_mrt.render, mitsuba_mrt.render_reference):
+        with pytest.raises(MRTError, match="the scene's sampler takes sample_count >= 1, got 0"):
+            call(scene)
+    with pytest.raises(MRTError, match="spp must be >= 1, got 0"):
+        mitsuba_mrt.render(scene, spp=0)
