@@ -61,6 +61,9 @@ class Candidate:
     shading : bool
         Whether OIDN saw the textured diffuse surfaces as their shading
         (``auto``'s passes).
+    clean_texture : bool
+        Whether that shading was multiplied back by the albedo denoised too
+        (at 1-2 spp: :func:`~mitsuba_mrt.recon.denoise.denoise_shading`).
     fraction : float or None
         The share of the pixels an ``mrt`` candidate's grid traces, where
         the plan chose it (None: the render's ``sample_fraction``).
@@ -76,6 +79,7 @@ class Candidate:
     compile_s: float = 0.0
     quality: str | None = None
     shading: bool = False
+    clean_texture: bool = False
     fraction: float | None = None
 
     @property
@@ -86,6 +90,7 @@ class Candidate:
         return (f"{self.name} @ {self.spp} spp" + (f", OIDN {self.quality}" if self.quality
                                                    else "")
                 + (", textures as shading" if self.shading else "")
+                + (" (texture denoised)" if self.clean_texture else "")
                 + (f", grid of {100 * self.fraction:.3g} % of the pixels"
                    if self.fraction is not None else ""))
 

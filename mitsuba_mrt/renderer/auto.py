@@ -407,7 +407,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
                            seconds=progress.trace_s + progress.denoise_s,
                            error=progress.predicted, quality=progress.quality or None,
-                           shading=progress.shading)
+                           shading=progress.shading, clean_texture=progress.clean_texture)
         plan = Plan(choice, f"{'denoised ' if denoise else ''}passes: {progress.stopped}",
                     target_error=params.noise_threshold or (
                         None if limit is not None else progress.full_error),

@@ -44,8 +44,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..recon.denoise import (denoise_image, denoise_shading, expected_seconds, preset,
-                             textured_pixels)
+from ..recon.denoise import (CLEAN_TEXTURE_SPP, denoise_image, denoise_shading,
+                             expected_seconds, preset, texture_seconds, textured_pixels)
 from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..runtime.jit import kernel_seconds
@@ -216,15 +216,27 @@ class Passes:
         return SHADING and self.textured is not None and bool(self.textured.any())
 
     def denoised(self, color: np.ndarray, index, shape: tuple, quality: str,
-                 shading: bool = False) -> np.ndarray:
+                 shading: bool = False, clean_texture: bool = False) -> np.ndarray:
         """``color`` (the pixels ``index``) denoised with the guides; with
-        ``shading``, the textured pixels as their shading."""
+        ``shading``, the textured pixels as their shading (``clean_texture``:
+        multiplied back by the albedo denoised)."""
         albedo, normal = (v.reshape(shape) for v in self.guide(index))
         color = color.reshape(shape)
         if not shading:
             return denoise_image(color, albedo, normal, quality=quality).reshape(-1, 3)
         return denoise_shading(color, albedo, normal, self.textured[index].reshape(shape[:2]),
-                               quality).reshape(-1, 3)
+                               quality, clean_texture).reshape(-1, 3)
+
+    @property
+    def cleans_texture(self) -> bool:
+        """Whether the image, at the spp so far, would be denoised with the
+        texture cleaned (``clean_texture``, up to :data:`CLEAN_TEXTURE_SPP`)."""
+        return self.shading and self.count <= CLEAN_TEXTURE_SPP
+
+    def texture_s(self, pixels: int) -> float:
+        """The time to leave for cleaning the texture (:func:`texture_seconds`)
+        where the image would get it, else 0."""
+        return texture_seconds(pixels) if self.cleans_texture else 0.0
 
     def half_noise(self) -> np.ndarray:
         """The squared noise of half 1's mean per pixel of ``crop`` and channel,
@@ -251,7 +263,9 @@ class Progress:
     relative error); ``predicted`` the error predicted for the final image
     (denoised at ``fast``); ``stopped`` why the passes ended; ``quality``
     the preset of the last OIDN call; ``shading`` whether it denoised the
-    textured diffuse surfaces as their shading.
+    textured diffuse surfaces as their shading, ``clean_texture`` whether
+    it multiplied that back by the albedo denoised too (at most
+    :data:`~mitsuba_mrt.recon.denoise.CLEAN_TEXTURE_SPP`, where the time allows).
     """
 
     spp: int = 0
@@ -264,6 +278,7 @@ class Progress:
     stopped: str = ""
     quality: str = ""
     shading: bool = False
+    clean_texture: bool = False
 
 
 def rate_of(history: list) -> float:
@@ -755,6 +770,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     elif not estimates:
         oidn_s = expected_seconds(n, quality) if denoise else 0.0
         fits = cost.fits((deadline - time.perf_counter() - oidn_s) / ROUND_SAFETY)
+        if denoise and surfaces is not None and fits <= CLEAN_TEXTURE_SPP:
+            # (textures seen as shading at so few spp are cleaned too: leave that its time)
+            fits = cost.fits((deadline - time.perf_counter() - oidn_s - texture_seconds(n))
+                             / ROUND_SAFETY)
         round_size = min(fits or cost.cheapest(), max_spp)
         round_size = round_size if exact is None else exact(round_size)
     passes.guide_spp = max_spp if deadline is not None and bakes else max(GUIDE_PASSES,
@@ -809,9 +828,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                                      + ROUND_SAFETY * round_s + oidn_s > deadline):
             progress.stopped = "the time limit"
             # the passes fill what the last OIDN call leaves of the time
-            left = max(deadline - time.perf_counter() - oidn_s, 0.0)
+            texture_s = passes.texture_s(n)
+            left = max(deadline - time.perf_counter() - oidn_s - texture_s, 0.0)
             final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
-            _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
+            _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n) - texture_s,
                   cost, max_spp, launch, halves=estimates, exact=exact,
                   least=2 if estimates else 1, companion=with_companion)
             break
@@ -820,12 +840,18 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             round_size = to_target(progress.history, target, passes.count, next_size)
     image = passes.mean
     if denoise:
-        left = None if deadline is None else deadline - time.perf_counter() - oidn_s
+        progress.shading = passes.shading and passes.guides == passes.count
+        cleans = progress.shading and passes.cleans_texture
+        texture_s = passes.texture_s(n) if cleans else 0.0
+        left = (None if deadline is None
+                else deadline - time.perf_counter() - oidn_s - texture_s)
         progress.quality = _final_preset(final, progress, progress.trace_s, oidn_s, left, n)
         begin = time.perf_counter()
-        progress.shading = passes.shading and passes.guides == passes.count
+        # (the texture is cleaned where the time allows: it gives more than a higher preset)
+        progress.clean_texture = cleans and (
+            deadline is None or deadline - begin >= _oidn_s(progress.quality, oidn_s, n) + texture_s)
         image = passes.denoised(image, slice(None), (height, width, 3), progress.quality,
-                                progress.shading)
+                                progress.shading, progress.clean_texture)
         progress.denoise_s = time.perf_counter() - begin
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)

@@ -269,3 +269,22 @@ def test_a_texture_denoised_as_its_shading_keeps_its_detail(oidn):
     assert np.abs(shading - clean).mean() < 0.5 * np.abs(plain - clean).mean()
     # nothing textured: OIDN's own call
     np.testing.assert_array_equal(denoise_shading(noisy, texture, normal, nowhere, "fast"), plain)
+
+
+def test_a_texture_finer_than_a_pixel_is_denoised_before_the_shading_is_multiplied_back(oidn):
+    from mitsuba_mrt.recon.denoise import denoise_shading
+
+    # one sample a pixel of a texture of 0.1 and 0.9 texels finer than the pixels:
+    # each pixel's albedo is one texel's, its true colour half of the shading
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[0:64, 0:64]
+    shading = (0.3 + 0.4 * x / 63)[..., None].repeat(3, -1)
+    texel = rng.choice([0.1, 0.9], size=(64, 64))[..., None].repeat(3, -1)
+    noisy = np.maximum(texel * shading * (1 + 0.3 * rng.standard_normal(shading.shape)), 0.0)
+    normal = np.zeros_like(shading)
+    normal[..., 2] = 1.0
+    everywhere = np.ones((64, 64), bool)
+    truth = 0.5 * shading
+    as_sampled = denoise_shading(noisy, texel, normal, everywhere, "fast")
+    cleaned = denoise_shading(noisy, texel, normal, everywhere, "fast", clean_texture=True)
+    assert np.abs(cleaned - truth).mean() < 0.5 * np.abs(as_sampled - truth).mean()

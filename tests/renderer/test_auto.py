@@ -589,6 +589,30 @@ def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
     assert not mitsuba_mrt.render(plain, noise_threshold=0.05).auto.choice.shading
 
 
+def test_passes_of_at_most_two_spp_multiply_their_shading_by_the_albedo_denoised(variant):
+    from mitsuba_mrt.modes.plan import Candidate
+    from mitsuba_mrt.recon.denoise import CLEAN_TEXTURE_SPP
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.renderer.api import GridTracer
+    from mitsuba_mrt.renderer.auto import _surfaces
+    from mitsuba_mrt.renderer.scene import unwrap
+
+    scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/spot_textures.xml", res=64)
+    sensor = scene.sensors()[0]
+    tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, 64, 0)
+    surfaces = _surfaces(scene, tracer, 64, 64)
+    cleaned = {}
+    for spp in (CLEAN_TEXTURE_SPP, CLEAN_TEXTURE_SPP + 1):
+        image, _, progress = progressive.run_passes(
+            tracer, 64, 64, quality="fast", target_error=None, deadline=None, max_spp=spp,
+            full_spp=64, area=1.0, surfaces=surfaces, fixed=True)
+        assert progress.shading and np.isfinite(image).all()
+        cleaned[spp] = progress.clean_texture
+    assert cleaned == {CLEAN_TEXTURE_SPP: True, CLEAN_TEXTURE_SPP + 1: False}
+    label = Candidate("full+oidn", "denoised", 2, shading=True, clean_texture=True).label
+    assert label == "full+oidn @ 2 spp, textures as shading (texture denoised)"
+
+
 def test_the_grid_marks_as_textured_only_pixels_of_surfaces_with_a_texture(variant,
                                                                            monkeypatch):
     # a plain surface's edge pixels mix two albedos; marked, their shading would
