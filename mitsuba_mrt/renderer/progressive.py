@@ -227,12 +227,6 @@ class Passes:
         return denoise_shading(color, albedo, normal, self.textured[index].reshape(shape[:2]),
                                quality, clean_texture).reshape(-1, 3)
 
-    @property
-    def cleans_texture(self) -> bool:
-        """Whether the image, at the spp so far, is to be denoised with the
-        texture cleaned (``clean_texture``, up to :data:`CLEAN_TEXTURE_SPP`)."""
-        return self.shading and self.count <= CLEAN_TEXTURE_SPP
-
     def half_noise(self) -> np.ndarray:
         """The squared noise of half 1's mean per pixel of ``crop`` and channel,
         from the halves' own difference (two independent means of ``a`` and
@@ -836,9 +830,10 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         begin = time.perf_counter()
         # under a time limit the texture is cleaned in what the passes left of
         # it, not at the cost of an spp (1 spp had 12-35 % more error than 2)
-        progress.clean_texture = progress.shading and passes.cleans_texture and (
-            deadline is None or deadline - begin
-            >= _oidn_s(progress.quality, oidn_s, n) + texture_seconds(n))
+        progress.clean_texture = (
+            progress.shading and passes.count <= CLEAN_TEXTURE_SPP
+            and (deadline is None or deadline - begin
+                 >= _oidn_s(progress.quality, oidn_s, n) + texture_seconds(n)))
         image = passes.denoised(image, slice(None), (height, width, 3), progress.quality,
                                 progress.shading, progress.clean_texture)
         progress.denoise_s = time.perf_counter() - begin
