@@ -19,7 +19,7 @@ from collections import Counter
 
 import numpy as np
 
-from ..recon.compose import demodulate
+from ..recon.compose import division_albedo, pixel_modulation, radiance_channels
 from ..recon.mixed import unmix_edges
 from ..recon.sampling import SamplePattern, cell_coordinates, every_pixel
 from ..recon.within_region import (GridValues, black_background, early_values,
@@ -66,7 +66,9 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     start = time.perf_counter()
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
     # irradiance over a power of two per channel: float32 work cannot overflow
-    grid = GridValues.from_samples(pattern, grid_ids, demodulate(trace.radiance, trace.albedo))
+    ids, inverse, plain = radiance_channels(grid_ids, trace.albedo, trace.radiance)
+    grid = GridValues.from_samples(pattern, grid_ids,
+                                   trace.radiance / division_albedo(trace.albedo, plain[inverse]))
     early = beside(early_values, pattern, grid_ids, grid.values)  # the cubic, beside the id pass
     grid_s = time.perf_counter() - start
     start = time.perf_counter()
@@ -92,7 +94,8 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     traced_mask = pattern.mask.copy()
     traced_mask[extra_xy[:, 1], extra_xy[:, 0]] = True
     # float64: traced pixels go in exactly
-    image, unmixed = unmix_edges(grid.unscaled(interp), albedo, id_map, traced_mask)
+    image, unmixed = unmix_edges(grid.unscaled(interp), albedo, id_map, traced_mask,
+                                 pixel_modulation(id_map, albedo, ids, plain))
     if extra is not None:
         check_radiance(extra.radiance, "pixels traced for thin regions")
         image[extra_xy[:, 1], extra_xy[:, 0]] = extra.radiance

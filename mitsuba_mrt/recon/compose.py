@@ -15,12 +15,102 @@ from .ids import run_starts
 
 #: Albedo below which a channel is not demodulated.
 ALBEDO_EPS = 1e-6
+#: The share of an id's samples with light but no albedo above which the id
+#: is interpolated as radiance (:func:`radiance_channels`).
+LIT_SHARE = 0.05
 
 
 def safe_albedo(albedo: np.ndarray) -> np.ndarray:
     """The albedo, with 1 wherever a channel is too small to divide by."""
     albedo = np.asarray(albedo, dtype=np.float64)
     return np.where(albedo > ALBEDO_EPS, albedo, 1.0)
+
+
+def radiance_channels(sample_ids: np.ndarray, albedo: np.ndarray,
+                      radiance: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ids, inverse, plain): the samples' distinct ids, sorted, each
+    sample's index among them, and for each id and channel whether it is
+    interpolated as radiance, not demodulated: where at most half the id's
+    samples have an albedo above :data:`ALBEDO_EPS` in the channel (a
+    mirror, an emitter, a black surface, the background), or, given the
+    samples' ``radiance``, where more than :data:`LIT_SHARE` of them have
+    light but no albedo (glass that shows a surface and the sky: its light
+    does not follow its albedo).
+
+    A sample at the edge of such an id whose footprint catches a little of
+    a brighter neighbour has a tiny albedo: divided by it, its value would
+    be hundreds of times its id's others, taken as radiance, and an
+    interpolation of both would light the whole neighbourhood.
+
+    Examples
+    --------
+    >>> ids, inverse, plain = radiance_channels(np.array([4, 4, 4, 7]),
+    ...                                         np.array([[0.0], [0.0], [0.02], [0.5]]))
+    >>> ids.tolist(), inverse.tolist(), plain[:, 0].tolist()
+    ([4, 7], [0, 0, 0, 1], [True, False])
+    """
+    albedo = np.asarray(albedo)
+    sample_ids = np.asarray(sample_ids).ravel()
+    if (sample_ids.dtype.kind in "iu" and len(sample_ids)
+            and 0 <= sample_ids.min() and sample_ids.max() < 4 * len(sample_ids)):
+        # small non-negative ids (ranks): their own indices, without a sort
+        inverse = sample_ids.astype(np.intp)
+        counts = np.bincount(inverse)
+        ids = np.flatnonzero(counts)
+        counts, inverse = counts[ids], np.searchsorted(ids, inverse)
+    else:
+        ids, inverse, counts = np.unique(sample_ids, return_inverse=True, return_counts=True)
+        inverse = inverse.ravel()
+
+    def per_id(flags):  # how many samples of each id have the flag, per channel
+        return np.stack([np.bincount(inverse, weights=f, minlength=len(ids)) for f in flags.T],
+                        axis=1)
+    dark = albedo <= ALBEDO_EPS
+    plain = 2 * per_id(~dark) <= counts[:, None]
+    if radiance is not None:
+        plain |= per_id(dark & (np.asarray(radiance) > ALBEDO_EPS)) > LIT_SHARE * counts[:, None]
+    return ids, inverse, plain
+
+
+def division_albedo(albedo: np.ndarray, plain: np.ndarray) -> np.ndarray:
+    """The albedo each sample's radiance is divided by (and multiplied back
+    by): :func:`safe_albedo`, and 1 in the channels its id takes as radiance
+    (``plain``, per sample: :func:`radiance_channels`' ``plain[inverse]``).
+
+    Examples
+    --------
+    >>> division_albedo(np.array([[0.0], [0.02], [0.5]]), np.array([[True], [True], [False]]))[:, 0]
+    array([1. , 1. , 0.5])
+    """
+    albedo = np.asarray(albedo, dtype=np.float64)
+    return np.where(plain | (albedo <= ALBEDO_EPS), 1.0, albedo)
+
+
+def pixel_modulation(id_map: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
+                     plain: np.ndarray) -> np.ndarray:
+    """(height, width, channels): what each pixel's interpolated value is
+    multiplied by, its own ``albedo`` however small, and 1 in the channels
+    its id takes as radiance (``ids``, ``plain``: :func:`radiance_channels`).
+    A pixel whose id no sample carries is taken as demodulated (mode
+    ``idpass`` traces it anyway).
+
+    Examples
+    --------
+    >>> ids, _, plain = radiance_channels(np.array([4, 4, 7]), np.array([[0.0], [0.0], [0.5]]))
+    >>> pixel_modulation(np.array([[4, 7, 7]]), np.array([[[0.01], [0.4], [0.0]]]), ids, plain)[0, :, 0]
+    array([1. , 0.4, 0. ])
+    """
+    out = np.array(albedo, dtype=np.float64)
+    some = plain.any(axis=1)
+    if not some.any():
+        return out
+    if plain[some].all():  # (the usual case: plain in every channel)
+        out[np.isin(id_map, ids[some])] = 1.0
+        return out
+    for c in range(plain.shape[1]):
+        out[..., c][np.isin(id_map, ids[plain[:, c]])] = 1.0
+    return out
 
 
 def demodulate(radiance: np.ndarray, albedo: np.ndarray) -> np.ndarray:

@@ -49,7 +49,8 @@ _DIRECTIONS = [(0, 1), (0, -1), (1, 0), (-1, 0)]
 
 
 def unmix_edges(irradiance: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
-                keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                keep: np.ndarray, modulation: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Radiance ``irradiance * albedo``, with the edge pixels that mix two regions unmixed.
 
     Parameters
@@ -62,6 +63,11 @@ def unmix_edges(irradiance: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
         The region of every pixel's centre.
     keep : ndarray of bool, shape (height, width)
         Pixels left as they are (the traced ones).
+    modulation : ndarray, shape (height, width, 3), optional
+        What ``irradiance`` is multiplied by where a pixel is not unmixed
+        (:func:`~.compose.pixel_modulation`), float64, overwritten with the
+        image; default: the albedo, 1 where it is at most
+        :data:`~.compose.ALBEDO_EPS`.
 
     Returns
     -------
@@ -80,7 +86,8 @@ def unmix_edges(irradiance: np.ndarray, albedo: np.ndarray, ids: np.ndarray,
     """
     irradiance = np.asarray(irradiance, dtype=np.float64)
     albedo = np.asarray(albedo, dtype=np.float64)
-    image = safe_albedo(albedo)  # a new array: the product goes into it
+    # the product goes into a new array, or into ``modulation``
+    image = safe_albedo(albedo) if modulation is None else np.asarray(modulation, np.float64)
     image *= irradiance
     unmixed = np.zeros(ids.shape, dtype=bool)
     ys, xs = np.nonzero(edge_mask(ids) & ~keep)

@@ -37,7 +37,7 @@ from ..runtime.threads import beside, for_row_blocks
 from . import quadric_jit
 from .bounds import (block_ranges, cell_row_runs, neighbourhood_ranges, power_of_two_scale,
                      suppress_fireflies)
-from .compose import albedo_constant_per_id, safe_albedo
+from .compose import albedo_constant_per_id, division_albedo, radiance_channels
 from .sampling import SamplePattern, cell_coordinates
 
 
@@ -541,7 +541,8 @@ def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.n
     counts = Counter()
     constant = black_background(sample_ids, radiance, counts, background)
     if not albedo_constant:
-        albedo = safe_albedo(albedo)
+        _, inverse, plain = radiance_channels(sample_ids, albedo, radiance)
+        albedo = division_albedo(albedo, plain[inverse])
         albedo_constant = albedo_constant_per_id(sample_ids, albedo)
     if albedo_constant:
         counts["albedo_division"] += 1
