@@ -49,6 +49,9 @@ def radiance_channels(sample_ids: np.ndarray, albedo: np.ndarray,
     ...                                         np.array([[0.0], [0.0], [0.02], [0.5]]))
     >>> ids.tolist(), inverse.tolist(), plain[:, 0].tolist()
     ([4, 7], [0, 0, 0, 1], [True, False])
+    >>> glass = np.array([[0.3]] * 18 + [[0.0]] * 2)   # 2 of 20 show the sky
+    >>> radiance_channels(np.zeros(20, int), glass, np.ones((20, 1)))[2].tolist()
+    [[True]]
     """
     albedo = np.asarray(albedo)
     sample_ids = np.asarray(sample_ids).ravel()
