@@ -7,7 +7,9 @@ The expensive integrator then runs only at the grid pixels, and at the
 pixels whose id no grid sample nearby carries (thin slivers).  Irradiance
 (radiance / albedo) is interpolated within ids and multiplied by the
 full-resolution albedo, so textures stay as sharp as in a full render, as
-the report's Section 4 proposes.  An edge pixel whose albedo is a mix of
+the report's Section 4 proposes; an id whose light does not follow its
+albedo (the background, a mirror, glass that shows the sky) is interpolated
+as radiance (:func:`~mitsuba_mrt.recon.compose.radiance_channels`).  An edge pixel whose albedo is a mix of
 its region's colour and a neighbour's shows both surfaces: it is given
 both regions' light in that mix (:mod:`mitsuba_mrt.recon.mixed`).
 """

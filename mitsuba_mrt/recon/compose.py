@@ -2,8 +2,10 @@
 
 The MRT interpolates irradiance, not colour (the report's Section 4): the
 trace's radiance is divided by the surface albedo, interpolated, and
-multiplied back.  Where the albedo is zero in a channel (a mirror, the
-background) that channel is interpolated as radiance.
+multiplied back.  Where an id's albedo is zero in a channel (a mirror, the
+background), or its light does not follow its albedo (glass that shows the
+sky), that channel of the id is interpolated as radiance
+(:func:`radiance_channels`).
 """
 
 from __future__ import annotations
