@@ -28,12 +28,13 @@ LADDER = (2, 4, 8, 16, 32)
 
 def load(name: str, res: int):
     import mitsuba_mrt
+    from mitsuba_mrt.bench.experiments import gallery_defines
 
     if name == "paper_fig1":
         return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "paper_fig1.xml", res=res,
                                       integrator="path", spp=64, jitter="true")
-    defines = {"res": res, **({"film_res": res + 128} if name == "crop_rgba" else {})}
-    return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml", **defines)
+    return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
+                                  **gallery_defines(name, res))
 
 
 def at_equal_time(curve: list[tuple[float, float]], seconds: float) -> float:

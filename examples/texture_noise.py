@@ -31,6 +31,7 @@ def main():
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
+    from mitsuba_mrt.bench.experiments import gallery_defines
     from mitsuba_mrt.bench.rival import converged_truth
     from mitsuba_mrt.recon.denoise import denoise_image, denoise_shading, textured_pixels
     from mitsuba_mrt.recon.metrics import paper_error
@@ -43,10 +44,8 @@ def main():
     runtime.configure()
     mitsuba_mrt.activate("auto")
     for name in args.scenes:
-        defines = {"res": args.res}
-        if name == "crop_rgba":  # its film holds the crop window
-            defines["film_res"] = args.res + 176
-        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml", **defines)
+        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
+                                       **gallery_defines(name, args.res))
         truth = converged_truth(scene, args.ref_spp)["box"]
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
