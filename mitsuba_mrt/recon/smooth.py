@@ -6,7 +6,10 @@ the pixels between.  The trace knows each pixel's noise (the variance of
 its samples), so each grid value is replaced by a weighted mean of itself
 and the samples of its id in its 3 x 3 grid neighbourhood, each weighted
 by ``exp(-d^2 / (2 strength^2))``, where ``d`` is the two samples'
-difference in units of their combined noise (averaged over channels).
+difference in units of their combined noise (averaged over channels), and
+a neighbour noisier than the sample by the ratio of their noise (as an
+inverse-variance mean would: a sample beside a light, whose filter reaches
+it, is bright and very noisy, and within its noise of anything).
 Neighbours that differ by much more than the noise (a highlight, a
 shadow's edge, another object) get no weight, so structure stays; noise
 on smooth shading averages down.  Samples without noise (a deterministic
@@ -92,6 +95,7 @@ def _smoothed_block(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
     # a pair's weight before ``usable`` is the same from either end: each
     # shift's is kept for the opposite shift, which reads the same pairs
     pairs = {}
+    level = noise.mean(axis=-1)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             if not (dy or dx):
@@ -106,6 +110,11 @@ def _smoothed_block(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
                                                      grid_ids[here] == grid_ids[there], scratch)
             size = base.shape
             w = np.multiply(base, usable[there], out=scratch.per_sample[:size[0], :size[1]])
+            # a neighbour noisier than the sample counts for less (its noise over
+            # the sample's: the inverse-variance weight, at most 1)
+            share = np.divide(level[here], level[there], out=np.ones(base.shape),
+                              where=level[there] > level[here])
+            np.multiply(w, share, out=w)
             weighted = np.multiply(values[there], w[..., None],
                                    out=scratch.first[:size[0], :size[1]])
             total[here] += weighted

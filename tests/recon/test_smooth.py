@@ -58,6 +58,15 @@ def test_results_stay_within_the_neighbourhood_range():
     assert out.min() >= values.min() and out.max() <= values.max()
 
 
+def test_a_far_noisier_neighbour_does_not_pull_a_quiet_sample():
+    # beside a light, a sample whose filter reaches it is bright and very noisy:
+    # within its own noise of its neighbours, it was averaged in with weight ~1
+    values = np.array([[[1.0], [1.0], [50.0]]])
+    noise = np.array([[[0.01], [0.01], [1e4]]])
+    out = smooth_grid(np.zeros((1, 3), int), values, noise)
+    assert abs(out[0, 1, 0] - 1.0) < 0.01
+
+
 def test_strength_zero_is_off():
     _, values, noise = noisy_grid()
     assert np.array_equal(smooth_grid(np.zeros(values.shape[:2], int), values, noise, 0.0),
@@ -82,6 +91,8 @@ def _by_the_formula(ids, values, noise, strength, fixed):
                     ratio = [dc * dc / bc if bc > 0 else (0.0 if dc == 0 else np.inf)
                              for dc, bc in zip(d, both)]
                     w = np.exp(-sum(ratio) / (2 * strength ** 2 * channels))
+                    here, there = noise[y, x].mean(), noise[v, u].mean()
+                    w *= min(here / there, 1.0) if there > 0 else 1.0
                     total += w * values[v, u]
                     weight += w
             out[y, x] = total / weight
