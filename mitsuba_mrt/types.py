@@ -179,6 +179,13 @@ class SparseTrace:
         :func:`mitsuba_mrt.renderer.scene_query.albedo_per_shape`), so every
         id's is too: radiance needs no division by albedo to be interpolated
         (a pixel straddling two shapes mixes their albedos, as its radiance).
+    emitter : ndarray of bool, shape (n,), optional
+        True where the pixel-centre ray hits a shape that emits light (an
+        area light); None when the scene has none or the ids were not traced.
+    filter_reach : int
+        How many pixels beyond its own a pixel's samples reach (Chebyshev),
+        through the pixel filter they were developed with: 0 for the box
+        filter, 1 for Mitsuba's tent, 2 for its gaussian.
     """
 
     radiance: np.ndarray
@@ -196,6 +203,8 @@ class SparseTrace:
     normal: np.ndarray | None = None
     odd: np.ndarray | None = None
     albedo_per_shape: bool = False
+    emitter: np.ndarray | None = None
+    filter_reach: int = 0
 
     def ids(self, rule: str) -> np.ndarray:
         """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).

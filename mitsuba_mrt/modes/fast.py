@@ -6,7 +6,9 @@ nearest column, chosen independently), then the report's Gaussian smoothing
 ids in an order their samples decide (most samples first,
 :func:`mitsuba_mrt.recon.edges.geometric_order`) rather than by number, so
 that renumbering the shapes changes nothing; the traced pixels keep their
-traced ids.  Values come from :mod:`mitsuba_mrt.recon.within_region`.
+traced ids.  Values come from :mod:`mitsuba_mrt.recon.within_region`; a surface's
+pixels within the pixel filter's reach of a light take theirs from the
+samples there alone (:func:`~mitsuba_mrt.recon.ids.light_halo`).
 Nothing is traced beyond the grid.
 """
 
@@ -15,8 +17,10 @@ from __future__ import annotations
 import time
 from collections import Counter
 
+import numpy as np
+
 from ..recon.edges import geometric_order, region_boxes, smooth_ids
-from ..recon.ids import rank_ids
+from ..recon.ids import light_halo, rank_ids
 from ..recon.sampling import SamplePattern
 from ..recon.within_region import TracedGridValues
 from ..runtime.threads import beside
@@ -26,6 +30,31 @@ from ..types import MRTParams, Reconstruction, Skips, SparseTrace, Timings, Trac
 def skips_from(counts: Counter) -> Skips:
     """The shortcuts counted by :mod:`mitsuba_mrt.recon.within_region`, as Skips."""
     return Skips(albedo_division=counts["albedo_division"], background=counts["background"])
+
+
+def _lights_apart(pattern: SamplePattern, trace: SparseTrace, values: TracedGridValues,
+                  labels: np.ndarray, sample_ranks: np.ndarray, rank_map: np.ndarray,
+                  background: int) -> tuple[np.ndarray, TracedGridValues]:
+    """``rank_map`` with a surface's pixels within the pixel filter's reach of
+    a light given ranks of their own (their rank plus the number of ids,
+    :func:`~mitsuba_mrt.recon.ids.light_halo`), and ``values`` started anew
+    where grid samples are among them; both as they were where the grid
+    sees no light."""
+    if not (trace.filter_reach > 0 and trace.emitter is not None and trace.emitter.any()):
+        return rank_map, values
+    lit = np.zeros(len(labels), dtype=bool)
+    lit[sample_ranks[trace.emitter]] = True
+    halo = light_halo(lit[rank_map], rank_map, trace.filter_reach, background)
+    if not halo.any():
+        return rank_map, values
+    dtype = np.int16 if 2 * len(labels) < 1 << 15 else np.int32
+    rank_map = np.where(halo, rank_map + len(labels), rank_map).astype(dtype)
+    apart = rank_map[np.ix_(pattern.rows, pattern.cols)].ravel()  # (traced: their own ranks)
+    if (apart != sample_ranks).any():
+        values.early.result()  # (its values are of the ranks before)
+        values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, apart,
+                                        background, trace.albedo_per_shape)
+    return rank_map, values
 
 
 def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
@@ -61,10 +90,13 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
         rank_map = smooth_ids(rank_map, params.filter_sigma, params.filter_cutoff,
                               background, boxes, order=geometric_order(sample_ranks))
         pattern.put_traced(rank_map, sample_ranks)  # a traced pixel's id is known
+    shown = rank_map
+    rank_map, values = _lights_apart(pattern, trace, values, labels, sample_ranks, rank_map,
+                                     background)
     timings.edges = time.perf_counter() - start
 
     start = time.perf_counter()
-    id_map = beside(labels.take, rank_map)  # back to ids, beside the fits
+    id_map = beside(labels.take, shown)  # back to ids, beside the fits
     image, counts = values.finish(rank_map)
     skips.add(skips_from(counts))
     stats["edge_pixels"] = counts["edge_pixels"]

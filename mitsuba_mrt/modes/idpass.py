@@ -11,17 +11,23 @@ the report's Section 4 proposes; an id whose light does not follow its
 albedo (the background, a mirror, glass that shows the sky) is interpolated
 as radiance (:func:`~mitsuba_mrt.recon.compose.radiance_channels`).  An edge pixel whose albedo is a mix of
 its region's colour and a neighbour's shows both surfaces: it is given
-both regions' light in that mix (:mod:`mitsuba_mrt.recon.mixed`).
+both regions' light in that mix (:mod:`mitsuba_mrt.recon.mixed`).  A
+surface's pixels within the pixel filter's reach of a light seen in the
+image are an id of their own (:func:`~mitsuba_mrt.recon.ids.light_halo`):
+the filter mixes the light into them, not into the pixels beyond.
 """
 
 from __future__ import annotations
 
 import time
 from collections import Counter
+from concurrent.futures import Future
+from typing import NamedTuple
 
 import numpy as np
 
 from ..recon.compose import division_albedo, pixel_modulation, radiance_channels
+from ..recon.ids import HALO_BIT, light_halo
 from ..recon.mixed import unmix_edges
 from ..recon.sampling import SamplePattern, cell_coordinates, every_pixel
 from ..recon.within_region import (GridValues, black_background, early_values,
@@ -59,27 +65,66 @@ def unsupported_pixels(pattern: SamplePattern, grid_ids: np.ndarray,
     return missing
 
 
+class _Grid(NamedTuple):
+    """The grid's values as :func:`idpass_reconstruct` interpolates them:
+    its ids, which of them are interpolated as radiance (``ids``,
+    ``inverse``, ``plain``: :func:`~mitsuba_mrt.recon.compose.radiance_channels`),
+    the values and the cubic (a future, computed beside)."""
+
+    grid_ids: np.ndarray
+    ids: np.ndarray
+    plain: np.ndarray
+    values: GridValues
+    early: Future
+
+
+def _grid(pattern: SamplePattern, trace: SparseTrace, grid_ids: np.ndarray) -> _Grid:
+    """The :class:`_Grid` of ``trace`` under ``grid_ids``: irradiance (or
+    radiance) over a power of two per channel, so float32 work cannot overflow."""
+    ids, inverse, plain = radiance_channels(grid_ids, trace.albedo, trace.radiance)
+    grid = GridValues.from_samples(pattern, grid_ids,
+                                   trace.radiance / division_albedo(trace.albedo, plain[inverse]))
+    return _Grid(grid_ids, ids, plain, grid, beside(early_values, pattern, grid_ids, grid.values))
+
+
 def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
                        tracer: Tracer | None = None) -> Reconstruction:
-    """Exact ids and albedo at every pixel, radiance on the grid (mode ``idpass``)."""
+    """Exact ids and albedo at every pixel, radiance on the grid (mode ``idpass``).
+
+    A surface's pixels within the pixel filter's reach of a light are set
+    apart from the rest of the surface (:func:`~mitsuba_mrt.recon.ids.light_halo`):
+    where the grid sees a light, its values wait for the id pass, which says
+    where those pixels are.
+    """
     rule = params.rule_for("idpass")
     stats = Counter()
     height, width = pattern.height, pattern.width
     start = time.perf_counter()
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
-    # irradiance over a power of two per channel: float32 work cannot overflow
-    ids, inverse, plain = radiance_channels(grid_ids, trace.albedo, trace.radiance)
-    grid = GridValues.from_samples(pattern, grid_ids,
-                                   trace.radiance / division_albedo(trace.albedo, plain[inverse]))
-    early = beside(early_values, pattern, grid_ids, grid.values)  # the cubic, beside the id pass
+    sees_light = trace.filter_reach > 0 and trace.emitter is not None and trace.emitter.any()
+    grid = None if sees_light else _grid(pattern, trace, grid_ids)  # beside the id pass
     grid_s = time.perf_counter() - start
     start = time.perf_counter()
     every = every_pixel(width, height)
     called = time.perf_counter()
     aov = tracer(every, stream=SeedStream.ID_PASS, radiance=False, replay=True)
     called = time.perf_counter() - called  # (less than its seconds where ``auto`` traced it)
-    id_map = aov.ids(rule).reshape(height, width)
+    id_map = shown_ids = aov.ids(rule).reshape(height, width)
     albedo = np.asarray(aov.albedo, dtype=np.float64).reshape(height, width, 3)
+    if aov.emitter is not None:
+        halo = light_halo(aov.emitter.reshape(height, width), id_map, trace.filter_reach)
+        if halo.any():
+            id_map = np.where(halo, id_map | HALO_BIT, id_map)
+            apart = np.where(halo[np.ix_(pattern.rows, pattern.cols)], grid_ids | HALO_BIT,
+                             grid_ids)
+            if grid is not None and (apart != grid_ids).any():
+                grid.early.result()  # (its values are of the ids before)
+                grid = None
+            grid_ids = apart
+    if grid is None:
+        begin = time.perf_counter()
+        grid = _grid(pattern, trace, grid_ids)
+        grid_s += time.perf_counter() - begin
     missing = unsupported_pixels(pattern, grid_ids, id_map)
     missing[np.ix_(pattern.rows, pattern.cols)] = False
     extra_xy = np.argwhere(missing)[:, ::-1]
@@ -91,23 +136,22 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     start = time.perf_counter()
     constant = black_background(grid_ids.ravel(), trace.radiance, stats)
     skips = Skips(background=stats.pop("background", 0))
-    interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values, id_map, constant,
-                                                 early.result())
+    interp, edge_pixels = interpolate_within_ids(pattern, grid_ids, grid.values.values, id_map,
+                                                 constant, grid.early.result())
     traced_mask = pattern.mask.copy()
     traced_mask[extra_xy[:, 1], extra_xy[:, 0]] = True
     # float64: traced pixels go in exactly
-    image, unmixed = unmix_edges(grid.unscaled(interp), albedo, id_map, traced_mask,
-                                 pixel_modulation(id_map, albedo, ids, plain))
+    image, unmixed = unmix_edges(grid.values.unscaled(interp), albedo, id_map, traced_mask,
+                                 pixel_modulation(id_map, albedo, grid.ids, grid.plain))
     if extra is not None:
         check_radiance(extra.radiance, "pixels traced for thin regions")
         image[extra_xy[:, 1], extra_xy[:, 0]] = extra.radiance
     image[np.ix_(pattern.rows, pattern.cols)] = trace.radiance.reshape(pattern.grid_shape + (3,))
-    stats["regions"] = int(len(np.unique(id_map)))
+    stats["regions"] = int(len(np.unique(shown_ids)))
     stats["edge_pixels"] = int(edge_pixels)
     stats["sliver_pixels"] = int(len(extra_xy))
     stats["unmixed_pixels"] = int(unmixed.sum())
-    stats["fireflies"] = grid.fireflies
+    stats["fireflies"] = grid.values.fireflies
     timings = Timings(trace_more=id_pass_s + (extra.seconds if extra else 0.0), edges=edges_s,
                       interpolate=grid_s + time.perf_counter() - start)
-    return Reconstruction(image, id_map, traced_mask, timings, skips, stats, unmixed)
-
+    return Reconstruction(image, shown_ids, traced_mask, timings, skips, stats, unmixed)

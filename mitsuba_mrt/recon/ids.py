@@ -21,6 +21,7 @@ is unoccluded from the hit point).  Two rules turn them into integer ids:
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from ..errors import MRTError
 
@@ -65,6 +66,51 @@ def encode_ids(shape_index: np.ndarray, visible_lights: np.ndarray,
         mask = np.asarray(visible_lights, dtype=np.int64) & ((1 << num_lights) - 1)
         ids = (shape_index << 32) | mask
     return np.where(background, 0, ids)
+
+
+#: Set in the ids of a surface's pixels near a light (:func:`light_halo`):
+#: above every id :func:`encode_ids` makes (shapes below 2^30).
+HALO_BIT = 1 << 62
+
+
+def light_halo(emitter: np.ndarray, id_map: np.ndarray, reach: int,
+               background: int = 0) -> np.ndarray:
+    """(height, width) bool: the pixels of a surface (not a light, not the
+    ``background`` id) within ``reach`` pixels (Chebyshev) of a pixel that sees a light.
+
+    A pixel filter wider than a pixel mixes each pixel with the light of its
+    neighbours: beside a light that is many times brighter than the surface
+    around it, the surface's pixels within the filter's reach are bright
+    with the light's, and the ones beyond are not.  Interpolated together,
+    the halo's values would spread over the surface; set apart
+    (``ids | HALO_BIT``), each part is interpolated from its own samples.
+
+    Parameters
+    ----------
+    emitter : ndarray of bool, shape (height, width)
+        Pixels whose centre sees a shape that emits light.
+    id_map : ndarray of int, shape (height, width)
+    reach : int
+        How far a pixel's samples reach (0: the box filter, no halo).
+    background : int
+        The background's id in ``id_map`` (-1: none), never in a halo.
+
+    Examples
+    --------
+    >>> light = np.zeros((5, 6), bool); light[0, 1:4] = True
+    >>> ids = np.where(light, 9, 3); ids[:, 5] = 0
+    >>> light_halo(light, ids, 1).astype(int)
+    array([[1, 0, 0, 0, 1, 0],
+           [1, 1, 1, 1, 1, 0],
+           [0, 0, 0, 0, 0, 0],
+           [0, 0, 0, 0, 0, 0],
+           [0, 0, 0, 0, 0, 0]])
+    """
+    emitter = np.asarray(emitter, dtype=bool)
+    if reach <= 0 or not emitter.any():
+        return np.zeros(emitter.shape, dtype=bool)
+    near = ndimage.maximum_filter(emitter, size=2 * int(reach) + 1, mode="constant")
+    return near & ~emitter & (np.asarray(id_map) != background)
 
 
 def id_to_paper_float(ids: np.ndarray) -> np.ndarray:

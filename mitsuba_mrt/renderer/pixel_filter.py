@@ -111,6 +111,18 @@ class FilterTable:
         return cls(float(radius), cdf, pdf, bool((values < 0).any()))
 
 
+def filter_reach(radius: float) -> int:
+    """How many pixels beyond its own (Chebyshev) a pixel's samples land in,
+    for a filter of ``radius`` pixels: those within ``radius`` of its centre.
+
+    Examples
+    --------
+    >>> [filter_reach(r) for r in (0.5, 1.0, 1.5, 2.0, 3.0)]  # box, tent, ..., gaussian, lanczos
+    [0, 1, 1, 2, 3]
+    """
+    return max(int(np.ceil(radius - 0.5 - 1e-9)), 0)
+
+
 #: Tables already made, by the filter's description (its type and parameters).
 _TABLES: dict[str, FilterTable] = {}
 

@@ -174,6 +174,13 @@ def curved_mirror_indices(scene: mi.Scene) -> np.ndarray:
     return np.flatnonzero(curved).astype(np.int64) + 1
 
 
+def emitter_indices(scene: mi.Scene) -> np.ndarray:
+    """1-based indices (as in :func:`ordered_shapes`) of the shapes that emit
+    light (area lights), which a camera ray may see."""
+    return np.flatnonzero([shape.is_emitter() for shape in ordered_shapes(scene)]
+                          ).astype(np.int64) + 1
+
+
 def _is_mirror_bsdf(bsdf) -> bool:
     flags = int(bsdf.flags()) if bsdf is not None else 0
     return mi.has_flag(flags, mi.BSDFFlags.Delta) and not mi.has_flag(flags, mi.BSDFFlags.Smooth)

@@ -23,8 +23,10 @@ from .ids import _ids_jit, _ids_scalar, shape_indices
 from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
-from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices, replayable,
-                          set_sample_count, shadow_rule, shape_albedos, tracked_lights)
+from .pixel_filter import filter_reach
+from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices,
+                          emitter_indices, replayable, set_sample_count, shadow_rule,
+                          shape_albedos, tracked_lights)
 
 #: Albedo (per channel) below which a pixel is not demodulated: dividing by
 #: it would turn the noise of a nearly black surface into huge values.  Dark
@@ -140,6 +142,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     if aovs:  # and not a black one
         samples.albedo[samples.albedo < ALBEDO_MIN] = 0.0
     curved = curved_mirror_indices(scene) if aovs and ids else np.zeros(0, np.int64)
+    lit = emitter_indices(scene) if aovs and ids else np.zeros(0, np.int64)
     return SparseTrace(samples.radiance if radiance else np.zeros((n, 3)),
                        samples.albedo if aovs else np.zeros((n, 3)), shape_index, visible,
                        len(lights), spp, time.perf_counter() - start,
@@ -147,7 +150,9 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        curved_mirror=np.isin(shape_index, curved) if len(curved) else None,
                        alpha=samples.alpha if radiance else None,
                        variance=samples.variance if radiance else None, normal=normal,
-                       odd=samples.odd if radiance else None, albedo_per_shape=one_colour)
+                       odd=samples.odd if radiance else None, albedo_per_shape=one_colour,
+                       emitter=np.isin(shape_index, lit) if len(lit) else None,
+                       filter_reach=0 if box else filter_reach(sensor.film().rfilter().radius()))
 
 
 def trace_shapes(scene: mi.Scene, sensor: mi.Sensor, pixel_xy: np.ndarray,
