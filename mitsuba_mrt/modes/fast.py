@@ -47,8 +47,8 @@ def _lights_apart(pattern: SamplePattern, trace: SparseTrace, values: TracedGrid
     halo = light_halo(lit[rank_map], rank_map, trace.filter_reach, background)
     if not halo.any():
         return rank_map, values
-    dtype = np.int16 if 2 * len(labels) < 1 << 15 else np.int32
-    rank_map = np.where(halo, rank_map + len(labels), rank_map).astype(dtype)
+    rank_map = rank_map.astype(np.int16 if 2 * len(labels) < 1 << 15 else np.int32)
+    np.add(rank_map, len(labels), out=rank_map, where=halo)
     apart = rank_map[np.ix_(pattern.rows, pattern.cols)].ravel()  # (traced: their own ranks)
     if (apart != sample_ranks).any():
         values.early.result()  # (its values are of the ranks before)

@@ -67,11 +67,10 @@ def unsupported_pixels(pattern: SamplePattern, grid_ids: np.ndarray,
 
 class _Grid(NamedTuple):
     """The grid's values as :func:`idpass_reconstruct` interpolates them:
-    its ids, which of them are interpolated as radiance (``ids``,
-    ``inverse``, ``plain``: :func:`~mitsuba_mrt.recon.compose.radiance_channels`),
-    the values and the cubic (a future, computed beside)."""
+    which ids are interpolated as radiance (``ids``, ``plain``:
+    :func:`~mitsuba_mrt.recon.compose.radiance_channels`), the values and
+    the cubic (a future, computed beside)."""
 
-    grid_ids: np.ndarray
     ids: np.ndarray
     plain: np.ndarray
     values: GridValues
@@ -84,7 +83,7 @@ def _grid(pattern: SamplePattern, trace: SparseTrace, grid_ids: np.ndarray) -> _
     ids, inverse, plain = radiance_channels(grid_ids, trace.albedo, trace.radiance)
     grid = GridValues.from_samples(pattern, grid_ids,
                                    trace.radiance / division_albedo(trace.albedo, plain[inverse]))
-    return _Grid(grid_ids, ids, plain, grid, beside(early_values, pattern, grid_ids, grid.values))
+    return _Grid(ids, plain, grid, beside(early_values, pattern, grid_ids, grid.values))
 
 
 def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
