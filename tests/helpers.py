@@ -44,9 +44,9 @@ def small_scene_xml(res: int = 32, integrator: str = '<integrator type="matte"/>
 </scene>"""
 
 
-def ball_scene_xml(res: int, spp: int = 8, rfilter: str = "box",
-                   sampler: str = "independent", max_depth: int = 4) -> str:
-    """A diffuse ball on a plane under an area light, path traced: noisy, as real scenes are."""
+def path_camera_xml(res: int, spp: int = 8, rfilter: str = "box",
+                    sampler: str = "independent", max_depth: int = 4) -> str:
+    """A scene's opening: ``path`` and a camera 8 units in front of the origin."""
     return f"""<scene version="3.0.0">
   <integrator type="path"><integer name="max_depth" value="{max_depth}"/></integrator>
   <sensor type="perspective">
@@ -55,7 +55,13 @@ def ball_scene_xml(res: int, spp: int = 8, rfilter: str = "box",
     <sampler type="{sampler}"><integer name="sample_count" value="{spp}"/></sampler>
     <film type="hdrfilm"><integer name="width" value="{res}"/><integer name="height" value="{res}"/>
       <rfilter type="{rfilter}"/></film>
-  </sensor>
+  </sensor>"""
+
+
+def ball_scene_xml(res: int, spp: int = 8, rfilter: str = "box",
+                   sampler: str = "independent", max_depth: int = 4) -> str:
+    """A diffuse ball on a plane under an area light, path traced: noisy, as real scenes are."""
+    return path_camera_xml(res, spp, rfilter, sampler, max_depth) + """
   <shape type="sphere"><float name="radius" value="1"/>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf></shape>
   <shape type="rectangle">

@@ -3,7 +3,7 @@ import numpy as np
 
 import mitsuba_mrt
 from mitsuba_mrt.recon.metrics import paper_error
-from helpers import small_scene_xml
+from helpers import path_camera_xml, small_scene_xml
 
 CHECKER_PLANE = """<shape type="rectangle">
     <transform name="to_world"><scale value="4"/></transform>
@@ -74,14 +74,7 @@ def test_silhouette_pixels_are_unmixed_by_the_id_pass_albedo(variant, monkeypatc
     assert error < 0.85 * np.abs(plain.image - reference)[mask].mean()
 
 
-GLASS_BALL = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="4"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, 0, 8" target="0, 0, 0" up="0, 1, 0"/></transform>
-    <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="64"/></film>
-  </sensor>
+GLASS_BALL = path_camera_xml(64, 16, "gaussian") + """
   <shape type="sphere"><float name="radius" value="1.2"/><bsdf type="dielectric"/></shape>
   <shape type="rectangle">
     <transform name="to_world"><scale value="20"/><rotate x="1" angle="-90"/><translate y="-1.2"/></transform>
@@ -102,15 +95,7 @@ def test_glass_beside_a_diffuse_surface_is_not_divided_by_its_albedo(variant):
         assert result.image[glass].max() <= 1.5 * reference[glass].max(), mode
 
 
-LIGHT_ON_A_WALL = """<scene version="3.0.0">
-  <integrator type="path"><integer name="max_depth" value="3"/></integrator>
-  <sensor type="perspective">
-    <float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, 0, 8" target="0, 0, 0" up="0, 1, 0"/></transform>
-    <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="64"/>
-      <rfilter type="tent"/></film>
-  </sensor>
+LIGHT_ON_A_WALL = path_camera_xml(64, 16, "tent", max_depth=3) + """
   <shape type="rectangle">
     <transform name="to_world"><scale value="10"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.5"/></bsdf></shape>
