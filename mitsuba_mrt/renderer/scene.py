@@ -22,8 +22,10 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
     """Load a Mitsuba XML scene, with ``<default>`` parameters overridden.
 
     Raises MRTError with a one-line message for a missing or malformed file,
-    and for a film that is empty or needs more memory than is available
-    (:func:`check_film`); warns (:class:`MRTWarning`) about emitters of
+    for a parameter that sets a sampler's ``sample_count`` below 1
+    (:func:`check_sample_counts`: Mitsuba's stratified samplers round it up to
+    1 and render anyway), and for a film that is empty or needs more memory
+    than is available (:func:`check_film`); warns (:class:`MRTWarning`) about emitters of
     negative intensity (:func:`warn_negative_emitters`).  In the JIT variants
     the scene loads on one thread, so that its kernels are the same in every
     process (and found in Dr.Jit's disk cache).
@@ -31,6 +33,8 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise MRTError(f"scene file not found: {path}")
+    if defines:
+        check_sample_counts(path, defines)
     try:
         # one thread in the JIT variants: loaded on several, a scene's kernels
         # come out in one of several variable orders from process to process,
@@ -48,6 +52,29 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
     except ElementTree.ParseError as exc:
         raise MRTError(f"malformed XML in {path}: {exc}") from None
     raise MRTError(f"cannot load {path}: {_first_line(error)}") from None
+
+
+def check_sample_counts(path: str, defines: dict) -> None:
+    """Raise MRTError where ``defines`` set a ``sample_count`` of the scene
+    file at ``path`` (an ``<integer name="sample_count" value="$name"/>``)
+    to an integer below 1.  Malformed XML, and values that are no integers,
+    are left to the loader, which names them."""
+    try:
+        root = ElementTree.parse(path).getroot()
+    except ElementTree.ParseError:
+        return
+    for element in root.iter("integer"):
+        value = element.get("value", "")
+        if element.get("name") != "sample_count" or not value.startswith("$"):
+            continue
+        name = value[1:]
+        try:
+            count = int(str(defines.get(name, 1)))
+        except ValueError:
+            continue
+        if count < 1:
+            raise MRTError(f"{name}={defines[name]} sets the scene's sample_count, "
+                           f"which must be >= 1")
 
 
 def _first_line(exc: Exception) -> str:

@@ -77,7 +77,10 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "spp must be >= 1"),
     # the scene's own sampler at 0 samples: a kernel would divide by it (SIGFPE)
     (["render", SCENES / "gallery" / "cornell.xml", "-D", "spp=0"],
-     "the scene's sampler takes sample_count >= 1, got 0"),
+     "spp=0 sets the scene's sample_count, which must be >= 1"),
+    # a stratified sampler rounds 0 up to 1 sample: refused as asked, not rendered at 1
+    (["render", SCENES / "paper_fig1.xml", "-D", "spp=-3"],
+     "spp=-3 sets the scene's sample_count, which must be >= 1"),
     (["render", SCENES / "paper_fraction.xml", "--mode", "magic"], "unknown mode"),
     # Mitsuba's list of unused parameters is on the lines after its first
     (["render", SCENES / "paper_fraction.xml", "-D", "foo=1", "-D", "bar=2"],

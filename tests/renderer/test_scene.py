@@ -84,6 +84,19 @@ def test_a_trace_of_no_samples_is_refused_not_launched(variant):
         trace_pixels(scene, scene.sensors()[0], scene.integrator(), np.zeros((1, 2), int), 0)
 
 
+def test_a_parameter_that_sets_sample_count_below_one_is_refused(variant, tmp_path):
+    # Mitsuba's stratified sampler rounds sample_count 0 up to 1 and renders
+    path = tmp_path / "stratified.xml"
+    path.write_text(small_scene_xml().replace('name="sample_count" value="1"', 'name="sample_count" value="$spp"')
+                    .replace("<scene version=\"3.0.0\">",
+                             "<scene version=\"3.0.0\"><default name=\"spp\" value=\"4\"/>"))
+    assert scene_module.load_scene(path, spp=1).sensors()[0].sampler().sample_count() == 1
+    for bad in (0, -2):
+        with pytest.raises(MRTError, match=f"spp={bad} sets the scene's sample_count, "
+                                           "which must be >= 1"):
+            scene_module.load_scene(path, spp=bad)
+
+
 def test_a_scene_whose_sampler_takes_no_samples_is_refused(variant):
     # mi.load_string takes sample_count 0; a render of it would end the process
     import mitsuba_mrt
