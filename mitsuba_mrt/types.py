@@ -206,8 +206,15 @@ class SparseTrace:
     emitter: np.ndarray | None = None
     filter_reach: int = 0
 
+    @property
+    def sees_spread_light(self) -> bool:
+        """Whether a traced pixel sees a light that the pixel filter spreads
+        over its neighbours (``emitter`` somewhere, ``filter_reach`` > 0):
+        where a light's halo (:func:`mitsuba_mrt.recon.ids.light_halo`) may be."""
+        return self.filter_reach > 0 and self.emitter is not None and bool(self.emitter.any())
+
     def ids(self, rule: str) -> np.ndarray:
-        """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).
+        """Region ids of the traced pixels under ``rule``` (see :mod:`mitsuba_mrt.recon.ids`).
 
         The exact rule labels a pixel that sees a mirror by the chain of
         shapes along its specular path (``path_id``); the paper rule, like

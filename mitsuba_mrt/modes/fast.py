@@ -40,7 +40,7 @@ def _lights_apart(pattern: SamplePattern, trace: SparseTrace, values: TracedGrid
     :func:`~mitsuba_mrt.recon.ids.light_halo`), and ``values`` started anew
     where grid samples are among them; both as they were where the grid
     sees no light."""
-    if not (trace.filter_reach > 0 and trace.emitter is not None and trace.emitter.any()):
+    if not trace.sees_spread_light:
         return rank_map, values
     lit = np.zeros(len(labels), dtype=bool)
     lit[sample_ranks[trace.emitter]] = True

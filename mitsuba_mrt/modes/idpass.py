@@ -9,9 +9,9 @@ pixels whose id no grid sample nearby carries (thin slivers).  Irradiance
 full-resolution albedo, so textures stay as sharp as in a full render, as
 the report's Section 4 proposes; an id whose light does not follow its
 albedo (the background, a mirror, glass that shows the sky) is interpolated
-as radiance (:func:`~mitsuba_mrt.recon.compose.radiance_channels`).  An edge pixel whose albedo is a mix of
-its region's colour and a neighbour's shows both surfaces: it is given
-both regions' light in that mix (:mod:`mitsuba_mrt.recon.mixed`).  A
+as radiance (:func:`~mitsuba_mrt.recon.compose.radiance_channels`).  An
+edge pixel whose albedo is a mix of its region's colour and a neighbour's
+shows both surfaces: it is given both regions' light in that mix (:mod:`mitsuba_mrt.recon.mixed`).  A
 surface's pixels within the pixel filter's reach of a light seen in the
 image are an id of their own (:func:`~mitsuba_mrt.recon.ids.light_halo`):
 the filter mixes the light into them, not into the pixels beyond.
@@ -100,8 +100,8 @@ def idpass_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPa
     height, width = pattern.height, pattern.width
     start = time.perf_counter()
     grid_ids = trace.ids(rule).reshape(pattern.grid_shape)
-    sees_light = trace.filter_reach > 0 and trace.emitter is not None and trace.emitter.any()
-    grid = None if sees_light else _grid(pattern, trace, grid_ids)  # beside the id pass
+    # the grid's values beside the id pass, unless a light's halo may change its ids
+    grid = None if trace.sees_spread_light else _grid(pattern, trace, grid_ids)
     grid_s = time.perf_counter() - start
     start = time.perf_counter()
     every = every_pixel(width, height)

@@ -68,8 +68,10 @@ def check_sample_counts(path: str, defines: dict) -> None:
         if element.get("name") != "sample_count" or not value.startswith("$"):
             continue
         name = value[1:]
+        if name not in defines:
+            continue
         try:
-            count = int(str(defines.get(name, 1)))
+            count = int(str(defines[name]))
         except ValueError:
             continue
         if count < 1:
