@@ -6,7 +6,7 @@ Gaussian smoothing), :mod:`.interpolate` (per-id RBF; kernels in
 :mod:`.rbf`, :mod:`.rbf_solve`, :mod:`.rbf_fast`), :mod:`.within_region`
 (the grid interpolator of the fast modes; its fits in :mod:`.quadric_jit`
 where Dr.Jit's LLVM backend runs; noisy grids smoothed first by
-:mod:`.smooth`), :mod:`.compose` (albedo), :mod:`.upsample`
+:mod:`.smooth`, its kernel in :mod:`.smooth_jit`), :mod:`.compose` (albedo), :mod:`.upsample`
 (scene-agnostic baselines) and :mod:`.metrics`.
 """
 

@@ -6,43 +6,19 @@ matrix products and temporaries.  This module computes the same fits in a
 single vectorised kernel on Dr.Jit's LLVM backend (all cores, no
 temporaries): the 4 x 4 block's moments, the ridge and a 6 x 6 Cholesky
 solve per group, then a second kernel evaluates the fits at the pixels.  It is used only where Dr.Jit's LLVM backend is safe to
-start (:func:`mitsuba_mrt.runtime.jit.llvm_usable`); elsewhere the numpy fit
+start (:func:`mitsuba_mrt.recon.llvm_arrays.available`); elsewhere the numpy fit
 runs, and the tests hold the two together.
 """
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
+
+from .llvm_arrays import aligned, available  # noqa: F401 (available: asked by within_region)
 
 
 #: Basis of the quadric, as powers (of x, of y) of the offsets from the cell's centre.
 _POWERS = ((0, 0), (1, 0), (0, 1), (2, 0), (1, 1), (0, 2))
-
-
-def _aligned(array_type, values: np.ndarray, dtype):
-    """``array_type`` over a 64-byte aligned copy of ``values``.
-
-    Dr.Jit wraps numpy memory without copying and writes its alignment into
-    the kernel, so unaligned inputs would give a new kernel (and an LLVM
-    compilation of about a second) on every call.
-    """
-    values = np.ravel(values)
-    itemsize = np.dtype(dtype).itemsize
-    buffer = np.empty(len(values) + 64 // itemsize, dtype=dtype)
-    start = (-buffer.ctypes.data % 64) // itemsize
-    view = buffer[start:start + len(values)]
-    view[:] = values
-    return array_type(view)
-
-
-@functools.cache
-def available() -> bool:
-    """True when the LLVM backend can run here (libLLVM >= 17 loaded)."""
-    from ..runtime.jit import llvm_usable
-
-    return llvm_usable()
 
 
 def quadric_values_jit(rows: np.ndarray, cols: np.ndarray, grid_ids: np.ndarray,
@@ -72,16 +48,16 @@ def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, 
 
     nr, nc = grid_ids.shape
     channels = grid_values.shape[2]
-    ids = _aligned(UInt64, grid_ids, np.uint64)
-    values = _aligned(Float64, grid_values, np.float64)
-    row_pos = _aligned(Float64, rows, np.float64)
-    col_pos = _aligned(Float64, cols, np.float64)
-    own_id = _aligned(UInt64, gid, np.uint64)
-    cell_y, cell_x = _aligned(Int32, gy0, np.int32), _aligned(Int32, gx0, np.int32)
+    ids = aligned(UInt64, grid_ids, np.uint64)
+    values = aligned(Float64, grid_values, np.float64)
+    row_pos = aligned(Float64, rows, np.float64)
+    col_pos = aligned(Float64, cols, np.float64)
+    own_id = aligned(UInt64, gid, np.uint64)
+    cell_y, cell_x = aligned(Int32, gy0, np.int32), aligned(Int32, gx0, np.int32)
     scale = dr.opaque(Float64, 1.0 / spacing)
     last_row, last_col = dr.opaque(Int32, nr - 1), dr.opaque(Int32, nc - 1)
     width, depth = dr.opaque(Int32, nc), dr.opaque(Int32, channels)
-    cy, cx = _aligned(Float64, centre_y, np.float64), _aligned(Float64, centre_x, np.float64)
+    cy, cx = aligned(Float64, centre_y, np.float64), aligned(Float64, centre_x, np.float64)
 
     # moments[(i, j)] = sum_k w_k ox^i oy^j for i + j <= 4; rhs[b][c] = sum_k w_k basis_b v_kc
     moments = {(i, j): Float64(0.0) for i in range(5) for j in range(5 - i)}
@@ -149,9 +125,9 @@ def _quadric_values(rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, 
     lowest = [dr.select(empty, -np.inf, v) for v in lowest]
     highest = [dr.select(empty, np.inf, v) for v in highest]
     dr.eval(*out, *lowest, *highest)  # channel-major: coefficients of channel c are out[6c:6c + 6]
-    group = _aligned(Int32, member, np.int32)
-    ox = (_aligned(Float64, px, np.float64) - dr.gather(Float64, cx, group)) * scale
-    oy = (_aligned(Float64, py, np.float64) - dr.gather(Float64, cy, group)) * scale
+    group = aligned(Int32, member, np.int32)
+    ox = (aligned(Float64, px, np.float64) - dr.gather(Float64, cx, group)) * scale
+    oy = (aligned(Float64, py, np.float64) - dr.gather(Float64, cy, group)) * scale
     terms = [ox, oy, ox * ox, ox * oy, oy * oy]
     result = []
     for c in range(channels):

@@ -23,6 +23,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..runtime.threads import for_row_blocks_of
+from .llvm_arrays import available
+from .smooth_jit import smooth_grid_jit
 
 #: Default strength: how many noise standard deviations apart two samples
 #: may be and still be averaged (the weight falls to 0.61 there).
@@ -30,7 +32,8 @@ SMOOTHING = 1.5
 
 
 def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
-                strength: float = SMOOTHING, fixed: np.ndarray | None = None) -> np.ndarray:
+                strength: float = SMOOTHING, fixed: np.ndarray | None = None,
+                use_jit: bool | None = None) -> np.ndarray:
     """Grid values averaged with their same-id neighbours that agree within the noise.
 
     Parameters
@@ -47,6 +50,9 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
         ``values`` unchanged.
     fixed : ndarray of bool, shape (nr, nc), optional
         Samples neither changed nor used for their neighbours (fireflies).
+    use_jit : bool, optional
+        Run it as one Dr.Jit kernel (:mod:`.smooth_jit`); default: where
+        Dr.Jit's LLVM backend is usable.  The tests hold the two together.
 
     Returns
     -------
@@ -71,6 +77,10 @@ def smooth_grid(grid_ids: np.ndarray, values: np.ndarray, noise: np.ndarray,
     nr, nc, channels = values.shape
     usable = np.ones((nr, nc), dtype=bool) if fixed is None else ~np.asarray(fixed, dtype=bool)
     scale = -0.5 / (strength * strength * channels)
+    if use_jit is None:
+        use_jit = available()
+    if use_jit:
+        return smooth_grid_jit(grid_ids, values, noise, usable, scale)
     out = np.empty_like(values)
 
     def rows(lo: int, hi: int) -> np.ndarray:  # (a row's mean reads the rows beside it)

@@ -15,7 +15,7 @@ each, with the state that is not a cache and stays.
 
 from __future__ import annotations
 
-from ..recon import denoise, quadric_jit, rbf_fast
+from ..recon import denoise, llvm_arrays, rbf_fast
 from . import auto, develop, guides, kept_plans, pixel_filter, replay
 
 
@@ -38,4 +38,4 @@ def clear_caches() -> None:
     denoise.release()
     rbf_fast._tensor_weights.cache_clear()
     rbf_fast._near_table.cache_clear()
-    quadric_jit.available.cache_clear()
+    llvm_arrays.available.cache_clear()

@@ -3,7 +3,9 @@ import pytest
 
 from mitsuba_mrt import grid_pattern
 from mitsuba_mrt.modes import reconstruct, smoothed_trace
+from mitsuba_mrt.recon import llvm_arrays
 from mitsuba_mrt.recon.smooth import smooth_grid
+from mitsuba_mrt.runtime.jit import counting_kernels
 from mitsuba_mrt.types import MRTParams, SparseTrace
 
 
@@ -147,3 +149,34 @@ def test_bad_strength_is_one_clear_error(value):
     from mitsuba_mrt.errors import MRTError
     with pytest.raises(MRTError, match="noise_smoothing must be a finite number >= 0"):
         MRTParams(noise_smoothing=value)
+
+
+@pytest.mark.skipif(not llvm_arrays.available(), reason="needs Dr.Jit's LLVM backend")
+@pytest.mark.parametrize("channels", [1, 3])
+def test_jit_and_numpy_smoothing_agree(channels):
+    # random ids, fixed samples, noise-free channels and equal samples: every branch
+    rng = np.random.default_rng(11)
+    for nr, nc in [(1, 1), (1, 7), (9, 2), (40, 33)]:
+        values = np.round(rng.normal(1, 0.2, (nr, nc, channels)), 1)
+        noise = np.abs(rng.normal(0, 0.05, values.shape)) * rng.integers(0, 2, values.shape)
+        ids, fixed = rng.integers(0, 3, (nr, nc)) << 40, rng.random((nr, nc)) < 0.2
+        jit = smooth_grid(ids, values, noise, 1.5, fixed, use_jit=True)
+        ref = smooth_grid(ids, values, noise, 1.5, fixed, use_jit=False)
+        np.testing.assert_allclose(jit, ref, rtol=1e-13)
+        unchanged = fixed | (noise.max(axis=-1) <= 0)
+        assert np.array_equal(jit[unchanged], values[unchanged])
+
+
+@pytest.mark.skipif(not llvm_arrays.available(), reason="needs Dr.Jit's LLVM backend")
+def test_the_smoothing_kernel_replays_for_another_grid_and_strength():
+    rng = np.random.default_rng(2)
+
+    def smooth(shape, strength):
+        values = rng.normal(1, 0.1, shape + (3,))
+        smooth_grid(np.zeros(shape, int), values, np.full(values.shape, 0.01), strength,
+                    use_jit=True)
+
+    smooth((20, 30), 1.5)
+    with counting_kernels() as counts:
+        smooth((31, 17), 0.7)
+    assert counts == [0, 0]
