@@ -196,7 +196,7 @@ def _note_overrun(result: MRTResult) -> None:
     took, limit = result.timings.total, plan.time_limit
     if took > OVERRUN * limit:
         least = (": the preview is the least this image costs here"
-                 if plan.choice == auto.PREVIEW else "")
+                 if plan.choice in (auto.PREVIEW, auto.UNDENOISED) else "")
         plan.notes.append(f"took {took:.3f} s, {took / limit:.1f}x the time limit of "
                           f"{limit:.3g} s{least}")
 

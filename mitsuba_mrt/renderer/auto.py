@@ -35,7 +35,8 @@ the check or the estimates that chose it: :func:`_again`):
    scene in this process, else from the preview's own grid, traced first):
    a *preview*, mode ``fast``, its grid denoised (:data:`PREVIEW`): one
    sample per grid pixel, and more where the limit leaves time
-   (:mod:`.preview`).
+   (:mod:`.preview`); not denoised (:data:`UNDENOISED`) where OIDN would
+   end past the limit even right after the grid's first launch.
 4. Otherwise the image in denoised passes (:mod:`.progressive`): each pass
    is part of the image, and the passes measure how good the denoised image
    gets, so planning costs little.  Under a time limit they fill it;
@@ -111,6 +112,10 @@ PROBE_SIDE = 16
 #: reconstructed.
 PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
 PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
+#: The preview where OIDN's call, even right after the grid's first launch,
+#: would end past :data:`PREVIEW_SLACK` times the limit: its grid as traced.
+UNDENOISED = Candidate("fast", "mrt", 1, mode="fast", denoise=False)
+UNDENOISED_NOTE = "OIDN would end past the time limit: the preview is not denoised"
 #: The note of a preview taken where a pass could be planned only at an spp
 #: traced before in the process (``{}``), as the sampler bakes its spp into
 #: its kernels: a pass of 1 spp would record kernels whose compilation, where
@@ -588,18 +593,26 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
     after the grid are expected to take: the median of the last previews'
     of ``key`` (:data:`_preview_after_s`), else :data:`FINISH_PER_PIXEL`'s
     (before OIDN's first call at the preview's quality, that call's expected
-    time on top, which holds its set-up): :func:`.preview.preview_grid`."""
+    time on top, which holds its set-up): :func:`.preview.preview_grid`.
+    Where those stages would end past :data:`PREVIEW_SLACK` times the limit
+    even right after the grid's first launch (a fresh process's first trace
+    and OIDN call), the preview goes without OIDN (:data:`UNDENOISED_NOTE`)."""
     kept = _preview_after_s.get(key)
+    quality = preset(params.denoise_quality)
     if kept:
         after = typical(kept)
     else:
-        quality = preset(params.denoise_quality)
         after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
             expected_seconds(pattern.count, quality)
             if denoise_seconds(pattern.count, quality) is None else 0.0)
     grid = preview_grid(outcome.grid, pattern, tracer,
                         started + TIME_MARGIN * params.time_limit - after)
-    outcome.plan.choice = replace(outcome.plan.choice, spp=grid.spp)
+    plan = outcome.plan
+    plan.choice = replace(plan.choice, spp=grid.spp)
+    if time.perf_counter() + after > started + PREVIEW_SLACK * params.time_limit:
+        plan.choice = replace(plan.choice, name=UNDENOISED.name, denoise=False)
+        plan.notes.append(UNDENOISED_NOTE)
+        return replace(outcome, grid=grid)  # (its stages are not a preview's with OIDN)
     return replace(outcome, grid=grid, preview_key=key)
 
 

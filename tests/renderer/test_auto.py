@@ -477,16 +477,25 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
     release()  # OIDN's cost unknown (its prior stands in), no pass traced yet
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
-    assert plan.reason == auto.PREVIEW_REASON and plan.choice == auto.PREVIEW
+    # OIDN would end past the limit even right after the grid: the preview goes without
+    assert plan.reason == auto.PREVIEW_REASON and plan.choice == auto.UNDENOISED
     assert result.mode == "auto" and result.mode_used == "fast" and result.spp == 1
-    assert result.params.denoise == "oidn" and result.timings.denoise > 0
+    assert result.params.denoise == "none" and result.timings.denoise == 0
     assert plan.time_limit == 1e-6 and plan.passes == []
     assert np.isfinite(result.image).all() and result.traced.grid > 0
+    assert plan.notes[0] == auto.UNDENOISED_NOTE
     assert plan.notes[-1].endswith("the time limit of 1e-06 s: the preview is the least "
                                    "this image costs here")
     # the grid that told the plan is the preview's own: the image is the mode's
-    direct = mitsuba_mrt.render(scene, mode="fast", spp=1, denoise="oidn")
+    direct = mitsuba_mrt.render(scene, mode="fast", spp=1, denoise="none")
     assert np.array_equal(result.image, direct.image)
+
+
+def test_a_preview_is_denoised_where_the_limit_leaves_oidn_room(scene, monkeypatch):
+    monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
+    result = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert result.auto.choice.name == auto.PREVIEW.name and result.params.denoise == "oidn"
+    assert auto.UNDENOISED_NOTE not in result.auto.notes and result.timings.denoise > 0
 
 
 def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scene,
@@ -798,9 +807,9 @@ def test_a_time_limit_the_render_overran_is_a_note(tmp_path):
                    "--time-limit", "1e-6", "--no-reference")
     assert proc.returncode == 0
     notes = [line for line in proc.stderr.splitlines() if line.startswith("note: ")]
-    assert len(notes) == 1 and "x the time limit of 1e-06 s" in notes[0]
+    assert len(notes) == 2 and "x the time limit of 1e-06 s" in notes[1]
     summary = json.loads(next(tmp_path.glob("*.json")).read_text())
-    assert notes[0] == "note: " + summary["auto"]["notes"][-1]
+    assert notes == ["note: " + note for note in summary["auto"]["notes"]]
 
 
 @pytest.mark.parametrize("option", ["--time-limit", "--noise-threshold"])
