@@ -598,10 +598,10 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
     even right after the grid's first launch (a fresh process's first trace
     and OIDN call), the preview goes without OIDN (:data:`UNDENOISED_NOTE`)."""
     kept = _preview_after_s.get(key)
-    quality = preset(params.denoise_quality)
     if kept:
         after = typical(kept)
     else:
+        quality = preset(params.denoise_quality)
         after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
             expected_seconds(pattern.count, quality)
             if denoise_seconds(pattern.count, quality) is None else 0.0)
