@@ -214,7 +214,7 @@ class SparseTrace:
         return self.filter_reach > 0 and self.emitter is not None and bool(self.emitter.any())
 
     def ids(self, rule: str) -> np.ndarray:
-        """Region ids of the traced pixels under ``rule``` (see :mod:`mitsuba_mrt.recon.ids`).
+        """Region ids of the traced pixels under ``rule`` (see :mod:`mitsuba_mrt.recon.ids`).
 
         The exact rule labels a pixel that sees a mirror by the chain of
         shapes along its specular path (``path_id``); the paper rule, like
