@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections import Counter
 from concurrent.futures import Future
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy import sparse
@@ -83,16 +84,12 @@ def separable_cubic(pattern: SamplePattern, grid_values: np.ndarray) -> np.ndarr
     """Cubic interpolation of ``grid_values`` (nr, nc, C) at every pixel.
 
     Two sparse products with four non-zeros a row: along the columns of
-    every grid row, then along the rows.
+    every grid row, then along the rows (:func:`_cubic_rows`).
     """
-    nr, nc, channels = grid_values.shape
-    wy = _axis_matrix(pattern.rows, pattern.height, grid_values.dtype)
-    wx = _axis_matrix(pattern.cols, pattern.width, grid_values.dtype)
-    by_column = wx @ grid_values.transpose(1, 0, 2).reshape(nc, nr * channels)
-    by_row = np.ascontiguousarray(
-        by_column.reshape(pattern.width, nr, channels).transpose(1, 0, 2))
-    return (wy @ by_row.reshape(nr, pattern.width * channels)).reshape(
-        pattern.height, pattern.width, channels)
+    first, weights = cubic_weights(pattern.rows, pattern.height)
+    return _cubic_rows(_axis_matrix(pattern.cols, pattern.width, grid_values.dtype),
+                       grid_values.transpose(1, 0, 2), first,
+                       weights.astype(grid_values.dtype))
 
 
 def _uniform_blocks(grid_ids: np.ndarray, size: int) -> np.ndarray:
@@ -344,25 +341,112 @@ def early_values(pattern: SamplePattern, grid_ids: np.ndarray,
     elsewhere the cubic is not used.
     """
     nr, nc = pattern.grid_shape
-    shape = (pattern.height, pattern.width)
     if nr < 4 or nc < 4:
-        image = np.zeros(shape + grid_values.shape[2:], grid_values.dtype)
-        stencil_ids = np.full(shape, -1, dtype=np.int64)
-    else:
-        fy, _ = cubic_weights(pattern.rows, pattern.height)
-        fx, _ = cubic_weights(pattern.cols, pattern.width)
-        stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
-        image = separable_cubic(pattern, grid_values)
-        stencil_ids = stencil_id.take(fy, axis=0).take(fx, axis=1)  # two 1-D gathers
-        _, _, lo, hi = block_ranges(grid_ids, grid_values)
-        cy, _ = cell_coordinates(pattern.rows, pattern.height)
-        cx, _ = cell_coordinates(pattern.cols, pattern.width)
-        lo, hi = lo.take(cx, axis=1), hi.take(cx, axis=1)  # (nr, width, C)
-        for start, stop, i in cell_row_runs(cy):  # the rows of one grid cell share a range
-            rows = image[start:stop]  # (minimum and maximum: np.clip is several times slower)
-            np.minimum(rows, hi[i], out=rows)
-            np.maximum(rows, lo[i], out=rows)
-    return EarlyValues(image, stencil_ids)
+        image = np.zeros((pattern.height, pattern.width) + grid_values.shape[2:],
+                         grid_values.dtype)
+        return EarlyValues(image, stencil_ids_of(pattern, grid_ids))
+    image = separable_cubic(pattern, grid_values)
+    cy, lo, hi = _cell_ranges(pattern, grid_ids, grid_values)
+    for start, stop, i in cell_row_runs(cy):  # the rows of one grid cell share a range
+        _clamp(image[start:stop], lo[i], hi[i])
+    return EarlyValues(image, stencil_ids_of(pattern, grid_ids))
+
+
+#: Image rows :func:`early_radiance` makes at a time: a block of them stays
+#: in cache from the cubic's product to the radiance.
+FUSED_ROWS = 64
+
+
+def early_radiance(pattern: SamplePattern, grid_ids: np.ndarray,
+                   grid: "GridValues") -> np.ndarray:
+    """The radiance (:meth:`GridValues.radiance`) of :func:`early_values`'
+    image, the same numbers, made :data:`FUSED_ROWS` rows at a time from the
+    grid rows their stencils take: no image-sized array but the radiance (a
+    fresh process pays for every page it touches, and a block stays in
+    cache from the products to the radiance)."""
+    nr, nc = pattern.grid_shape
+    if nr < 4 or nc < 4:
+        return grid.radiance(early_values(pattern, grid_ids, grid.values).image)
+    values = grid.values
+    wx = _axis_matrix(pattern.cols, pattern.width, values.dtype)
+    first, weights = cubic_weights(pattern.rows, pattern.height)
+    weights = weights.astype(values.dtype)
+    _, _, lo, hi = block_ranges(grid_ids, values)
+    cy, _ = cell_coordinates(pattern.rows, pattern.height)
+    cx, _ = cell_coordinates(pattern.cols, pattern.width)
+    by_grid_column = values.transpose(1, 0, 2)  # (nc, nr, C), a view
+    out = np.empty((pattern.height, pattern.width, 3))
+    tiled = grid.tiled_scale(pattern.width)
+    for start, stop, runs in _run_blocks(cy, FUSED_ROWS):
+        r0, r1 = first[start], first[stop - 1] + 4  # the grid rows the block's stencils take
+        block = _cubic_rows(wx, by_grid_column[:, r0:r1], first[start:stop] - r0,
+                            weights[start:stop])
+        c0, c1 = runs[0][2], runs[-1][2] + 1  # the cells of the block's rows
+        block_lo, block_hi = lo[c0:c1].take(cx, axis=1), hi[c0:c1].take(cx, axis=1)
+        for begin, end, i in runs:
+            _clamp(block[begin - start:end - start], block_lo[i - c0], block_hi[i - c0])
+        grid.radiance_into(block, out[start:stop], tiled)
+    return out
+
+
+def _cubic_rows(wx: sparse.csr_matrix, columns: np.ndarray, first: np.ndarray,
+                weights: np.ndarray) -> np.ndarray:
+    """Rows of :func:`separable_cubic`'s image, (n, width, C), from the grid
+    rows their stencils take, ``columns`` (nc, k, C): every value is the
+    whole image's, the same products summed in the same order.  ``wx``: the
+    columns' weights (:func:`_axis_matrix`); ``first`` (n,) and ``weights``
+    (n, 4): each row's first grid row (of the k) and its weights."""
+    nc, k, channels = columns.shape
+    by_column = wx @ columns.reshape(nc, k * channels)
+    by_row = np.ascontiguousarray(by_column.reshape(-1, k, channels).transpose(1, 0, 2))
+    n = len(first)
+    wy = sparse.csr_matrix((weights.ravel(), (first[:, None] + np.arange(4)).ravel(),
+                            np.arange(0, 4 * n + 1, 4)), shape=(n, k))
+    return (wy @ by_row.reshape(k, -1)).reshape(n, -1, channels)
+
+
+def stencil_ids_of(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
+    """(height, width): the id all 16 samples of a pixel's cubic stencil
+    carry, else -1 (everywhere on a grid under 4 x 4, which has no cubic)."""
+    nr, nc = pattern.grid_shape
+    if nr < 4 or nc < 4:
+        return np.full((pattern.height, pattern.width), -1, dtype=np.int64)
+    fy, _ = cubic_weights(pattern.rows, pattern.height)
+    fx, _ = cubic_weights(pattern.cols, pattern.width)
+    stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
+    return stencil_id.take(fy, axis=0).take(fx, axis=1)  # two 1-D gathers
+
+
+def _cell_ranges(pattern: SamplePattern, grid_ids: np.ndarray,
+                 grid_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(each image row's grid cell, the least and largest values of the 4 x 4
+    blocks (:func:`~mitsuba_mrt.recon.bounds.block_ranges`) at every image
+    column, (nr, width, C) each): what clamps the cubic."""
+    _, _, lo, hi = block_ranges(grid_ids, grid_values)
+    cy, _ = cell_coordinates(pattern.rows, pattern.height)
+    cx, _ = cell_coordinates(pattern.cols, pattern.width)
+    return cy, lo.take(cx, axis=1), hi.take(cx, axis=1)
+
+
+def _clamp(rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """``rows`` (k, width, C) clamped in place to ``lo`` and ``hi`` (width, C)
+    (minimum and maximum: np.clip is several times slower)."""
+    np.minimum(rows, hi, out=rows)
+    np.maximum(rows, lo, out=rows)
+
+
+def _run_blocks(cell: np.ndarray, rows: int):
+    """The runs of :func:`~mitsuba_mrt.recon.bounds.cell_row_runs` in groups
+    of at least ``rows`` image rows (the last may have fewer): (start, stop,
+    the group's runs)."""
+    group = []
+    for run in cell_row_runs(cell):
+        group.append(run)
+        if run[1] - group[0][0] >= rows:
+            yield group[0][0], run[1], group
+            group = []
+    if group:
+        yield group[0][0], group[-1][1], group
 
 
 def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
@@ -394,17 +478,18 @@ def interpolate_within_ids(pattern: SamplePattern, grid_ids: np.ndarray,
         early = early_values(pattern, grid_ids, grid_values)
     out = np.ascontiguousarray(early.image)  # (it is already: no copy)
     index, values, fitted = near_edge_values(pattern, grid_ids, grid_values, id_map,
-                                             constant, early)
+                                             constant, early.stencil_ids)
     out.reshape(-1, out.shape[2])[index] = values  # a view, written through
     return out, fitted
 
 
 def near_edge_values(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np.ndarray,
                      id_map: np.ndarray, constant: dict | None,
-                     early: EarlyValues) -> tuple[np.ndarray, np.ndarray, int]:
-    """The pixels whose cubic stencil is not all of their id: flat indices,
-    values (m, C) and how many were fitted (the others are of a constant id)."""
-    index = np.flatnonzero(early.stencil_ids != id_map)  # flat: cheaper than 2-D
+                     stencil_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pixels whose cubic stencil is not all of their id (``stencil_ids``,
+    :class:`EarlyValues`'): flat indices, values (m, C) and how many were
+    fitted (the others are of a constant id)."""
+    index = np.flatnonzero(stencil_ids != id_map)  # flat: cheaper than 2-D
     own = id_map.ravel()[index]
     values = np.empty((len(index), grid_values.shape[2]), dtype=grid_values.dtype)
     fit = np.ones(len(index), dtype=bool)
@@ -464,24 +549,32 @@ class GridValues:
         """float64 radiance (height, width, 3) of interpolated scaled radiance
         (C = 3), or irradiance and albedo (C = 6); in row blocks on all cores
         (on one, called from a task of the pool itself)."""
-        height, width, channels = interpolated.shape
+        height, width, _ = interpolated.shape
         out = np.empty((height, width, 3))
-        # the scales tiled along a row: numpy broadcasts a (3,) operand slowly
-        scale = self.scale if channels == 3 else self.scale[:3] * self.scale[3:]
-        tiled = np.tile(scale, width)
+        tiled = self.tiled_scale(width)
 
         def rows(start, stop):
-            flat = out[start:stop].reshape(stop - start, -1)
-            if channels == 3:
-                np.multiply(interpolated[start:stop].reshape(stop - start, -1), tiled, out=flat)
-            else:  # irradiance times albedo, multiplied in float64
-                block = interpolated[start:stop]
-                np.multiply(block[..., :3], block[..., 3:], out=out[start:stop],
-                            dtype=np.float64)
-                flat *= tiled
+            self.radiance_into(interpolated[start:stop], out[start:stop], tiled)
 
         for_row_blocks(rows, height, min_rows=max(1, PARALLEL_PIXELS // max(width, 1)))
         return out
+
+    def tiled_scale(self, width: int) -> np.ndarray:
+        """The radiance's scale (3,) tiled along a row of ``width`` pixels
+        (numpy broadcasts a (3,) operand slowly)."""
+        scale = self.scale if len(self.scale) == 3 else self.scale[:3] * self.scale[3:]
+        return np.tile(scale, width)
+
+    @staticmethod
+    def radiance_into(block: np.ndarray, out: np.ndarray, tiled: np.ndarray) -> None:
+        """:meth:`radiance` of the rows ``block`` (k, width, C) into ``out``
+        (k, width, 3), float64; ``tiled``: :meth:`tiled_scale`."""
+        flat = out.reshape(len(out), -1)
+        if block.shape[2] == 3:
+            np.multiply(block.reshape(len(block), -1), tiled, out=flat)
+        else:  # irradiance times albedo, multiplied in float64
+            np.multiply(block[..., :3], block[..., 3:], out=out, dtype=np.float64)
+            flat *= tiled
 
 
 @dataclass
@@ -489,10 +582,11 @@ class TracedGridValues:
     """Within-id interpolation of the traced grid, in two halves.
 
     :meth:`start` launches, on a worker thread, all that needs no final
-    pixel ids (choosing the values to interpolate, then
-    :func:`early_values` on them and their float64 radiance), so a caller
-    can find the ids meanwhile; :meth:`finish` takes them and fits the
-    pixels near edges.
+    pixel ids: the values to interpolate (:class:`EarlyGrid`, handed over as
+    soon as they are chosen), then :func:`early_radiance` on them, the
+    cubic's float64 radiance; a caller finds the ids meanwhile, and
+    :meth:`finish` takes them and fits the pixels near edges while the
+    cubic goes on.
     Radiance is interpolated directly when albedo is constant within every
     id; otherwise irradiance (radiance / albedo) and albedo are, with the
     same weights, and multiplied back.  A black background is filled, and
@@ -502,7 +596,8 @@ class TracedGridValues:
     pattern: SamplePattern
     radiance: np.ndarray  # (n, 3) traced radiance, grid order
     grid_ids: np.ndarray  # sample ids (or their ranks), shape pattern.grid_shape
-    early: Future         # of _values_and_early(pattern, radiance, albedo, sample_ids, background)
+    grid: Future          # of the EarlyGrid, set before the cubic starts
+    early: Future         # of _values_and_early(...): the cubic's radiance
 
     @classmethod
     def start(cls, pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
@@ -512,49 +607,67 @@ class TracedGridValues:
         of the background in ``sample_ids``, -1 if none; ``albedo_constant``
         says every id's albedo is one colour whatever the samples say (those
         straddling two surfaces mix theirs)."""
-        return cls(pattern, radiance, sample_ids.reshape(pattern.grid_shape),
+        grid = Future()
+        return cls(pattern, radiance, sample_ids.reshape(pattern.grid_shape), grid,
                    beside(_values_and_early, pattern, radiance, albedo, sample_ids, background,
-                          albedo_constant))
+                          albedo_constant, grid))
 
     def finish(self, id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
         """Radiance (height, width, 3), float64, with every pixel's values from
         its own id, and counts: ``albedo_division`` and ``background``
         (shortcuts taken), ``edge_pixels`` (pixels fitted near edges),
         ``fireflies`` (samples kept out of the interpolation)."""
-        grid, constant, counts, early, image = self.early.result()
-        # the cubic's radiance was made beside the ids; the pixels near edges go in
+        early = self.grid.result()
+        # the pixels near edges, fitted while the cubic's radiance is made
         index, values, edge_pixels = near_edge_values(
-            self.pattern, self.grid_ids, grid.values, id_map, constant, early)
-        image.reshape(-1, 3)[index] = grid.radiance_of(values)
+            self.pattern, self.grid_ids, early.grid.values, id_map, early.constant,
+            early.stencil_ids)
+        values = early.grid.radiance_of(values)
+        image = self.early.result()
+        image.reshape(-1, 3)[index] = values
         self.pattern.put_traced(image, self.radiance)
+        counts = early.counts
         counts["edge_pixels"] = int(edge_pixels)
         return image, counts
 
 
+class EarlyGrid(NamedTuple):
+    """What :class:`TracedGridValues` hands over before its cubic: the grid
+    values to interpolate, the ids known constant (:func:`black_background`),
+    the shortcut counts and the stencil ids (:func:`stencil_ids_of`)."""
+
+    grid: GridValues
+    constant: dict
+    counts: Counter
+    stencil_ids: np.ndarray
+
+
 def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
-                      sample_ids: np.ndarray, background: int = 0,
-                      albedo_constant: bool = False):
-    """The grid values to interpolate (:class:`GridValues` of radiance, or of
-    irradiance and albedo where the albedo varies within an id), the constant
-    ids, the shortcut counts, :func:`early_values` of those values, and its
-    radiance (float64)."""
-    counts = Counter()
-    constant = black_background(sample_ids, radiance, counts, background)
-    if not albedo_constant:
-        _, inverse, plain = radiance_channels(sample_ids, albedo, radiance)
-        albedo = division_albedo(albedo, plain[inverse])
-        albedo_constant = albedo_constant_per_id(sample_ids, albedo)
-    if albedo_constant:
-        counts["albedo_division"] += 1
-        values = radiance
-    else:
-        values = np.concatenate([radiance / albedo, albedo], axis=1)
-    grid_ids = sample_ids.reshape(pattern.grid_shape)
-    grid = GridValues.from_samples(pattern, grid_ids, values)
-    counts["fireflies"] = grid.fireflies
-    early = early_values(pattern, grid_ids, grid.values)
-    # (on the pool's worker, beside the ids: its row blocks run on this thread)
-    return grid, constant, counts, early, grid.radiance(early.image)
+                      sample_ids: np.ndarray, background: int, albedo_constant: bool,
+                      handed: Future) -> np.ndarray:
+    """Set ``handed`` to the :class:`EarlyGrid` (the values to interpolate:
+    :class:`GridValues` of radiance, or of irradiance and albedo where the
+    albedo varies within an id), then return :func:`early_radiance` of them."""
+    try:
+        counts = Counter()
+        constant = black_background(sample_ids, radiance, counts, background)
+        if not albedo_constant:
+            _, inverse, plain = radiance_channels(sample_ids, albedo, radiance)
+            albedo = division_albedo(albedo, plain[inverse])
+            albedo_constant = albedo_constant_per_id(sample_ids, albedo)
+        if albedo_constant:
+            counts["albedo_division"] += 1
+            values = radiance
+        else:
+            values = np.concatenate([radiance / albedo, albedo], axis=1)
+        grid_ids = sample_ids.reshape(pattern.grid_shape)
+        grid = GridValues.from_samples(pattern, grid_ids, values)
+        counts["fireflies"] = grid.fireflies
+        handed.set_result(EarlyGrid(grid, constant, counts, stencil_ids_of(pattern, grid_ids)))
+    except BaseException as error:  # (the caller waits on it first)
+        handed.set_exception(error)
+        raise
+    return early_radiance(pattern, grid_ids, grid)
 
 
 def black_background(sample_ids: np.ndarray, radiance: np.ndarray, counts: Counter,

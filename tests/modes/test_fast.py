@@ -207,6 +207,36 @@ def test_values_beside_the_ids_equal_one_thread(monkeypatch):
     assert pooled.stats == inline.stats
 
 
+@pytest.mark.parametrize("height, width, fraction", [(200, 160, 0.1), (67, 301, 0.2),
+                                                      (24, 30, 0.1), (9, 9, 0.1)])
+@pytest.mark.parametrize("channels", [3, 6])
+def test_fused_cubic_radiance_is_the_whole_image_one(height, width, fraction, channels):
+    # early_radiance makes the cubic, its clamp and its radiance a block of
+    # rows at a time: the same numbers as the whole image's, bit for bit
+    # (the last shape's grid is under 4 x 4: no cubic, zeros)
+    p = grid_pattern(width, height, fraction)
+    rng = np.random.default_rng(channels)
+    grid_ids = (rng.random(p.grid_shape) < 0.1).astype(np.int64)
+    grid = fast.GridValues.from_samples(p, grid_ids, rng.random((p.count, channels)) * 7.0)
+    whole = grid.radiance(fast.early_values(p, grid_ids, grid.values).image)
+    fused = fast.early_radiance(p, grid_ids, grid)
+    assert np.array_equal(fused.view(np.uint64), whole.view(np.uint64))
+
+
+def test_an_error_before_the_hand_over_reaches_finish(monkeypatch):
+    # the values' thread hands the grid over before its cubic; an error
+    # before that must come out of finish, not leave it waiting
+    p = grid_pattern(48, 40, 0.15)
+    t = trace_from(p, np.ones((p.count, 3)))
+
+    def broken(*args):
+        raise FloatingPointError("broken grid")
+    monkeypatch.setattr(fast.GridValues, "from_samples", broken)
+    values = fast.TracedGridValues.start(p, t.radiance, t.albedo, t.shape_index, 0)
+    with pytest.raises(FloatingPointError, match="broken grid"):
+        values.finish(np.ones((40, 48), dtype=int))
+
+
 def test_worker_errors_come_out_of_the_result(monkeypatch):
     future = threads.beside(np.linalg.cholesky, -np.eye(2))
     with pytest.raises(np.linalg.LinAlgError):
