@@ -344,11 +344,8 @@ def early_values(pattern: SamplePattern, grid_ids: np.ndarray,
     if nr < 4 or nc < 4:
         image = np.zeros((pattern.height, pattern.width) + grid_values.shape[2:],
                          grid_values.dtype)
-        return EarlyValues(image, stencil_ids_of(pattern, grid_ids))
-    image = separable_cubic(pattern, grid_values)
-    cy, lo, hi = _cell_ranges(pattern, grid_ids, grid_values)
-    for start, stop, i in cell_row_runs(cy):  # the rows of one grid cell share a range
-        _clamp(image[start:stop], lo[i], hi[i])
+    else:  # (one block: the whole image)
+        (_, _, image), = _clamped_cubic(pattern, grid_ids, grid_values, pattern.height)
     return EarlyValues(image, stencil_ids_of(pattern, grid_ids))
 
 
@@ -360,14 +357,27 @@ FUSED_ROWS = 64
 def early_radiance(pattern: SamplePattern, grid_ids: np.ndarray,
                    grid: "GridValues") -> np.ndarray:
     """The radiance (:meth:`GridValues.radiance`) of :func:`early_values`'
-    image, the same numbers, made :data:`FUSED_ROWS` rows at a time from the
-    grid rows their stencils take: no image-sized array but the radiance (a
-    fresh process pays for every page it touches, and a block stays in
-    cache from the products to the radiance)."""
+    image, the same numbers, made :data:`FUSED_ROWS` rows at a time
+    (:func:`_clamped_cubic`): no image-sized array but the radiance (a fresh
+    process pays for every page it touches, and a block stays in cache from
+    the products to the radiance)."""
     nr, nc = pattern.grid_shape
-    if nr < 4 or nc < 4:
-        return grid.radiance(early_values(pattern, grid_ids, grid.values).image)
-    values = grid.values
+    if nr < 4 or nc < 4:  # no cubic: zeros
+        return np.zeros((pattern.height, pattern.width, 3))
+    out = np.empty((pattern.height, pattern.width, 3))
+    tiled = grid.tiled_scale(pattern.width)
+    for start, stop, block in _clamped_cubic(pattern, grid_ids, grid.values, FUSED_ROWS):
+        grid.radiance_into(block, out[start:stop], tiled)
+    return out
+
+
+def _clamped_cubic(pattern: SamplePattern, grid_ids: np.ndarray, values: np.ndarray,
+                   rows: int):
+    """(start, stop, block): :func:`separable_cubic`'s image rows
+    ``start:stop`` (n, width, C), at least ``rows`` of them at a time (whole
+    grid cells), each made from the grid rows its stencils take and clamped,
+    per channel, to the range of the 4 x 4 block of its cell
+    (:func:`mitsuba_mrt.recon.bounds.block_ranges`); a grid of at least 4 x 4."""
     wx = _axis_matrix(pattern.cols, pattern.width, values.dtype)
     first, weights = cubic_weights(pattern.rows, pattern.height)
     weights = weights.astype(values.dtype)
@@ -375,18 +385,15 @@ def early_radiance(pattern: SamplePattern, grid_ids: np.ndarray,
     cy, _ = cell_coordinates(pattern.rows, pattern.height)
     cx, _ = cell_coordinates(pattern.cols, pattern.width)
     by_grid_column = values.transpose(1, 0, 2)  # (nc, nr, C), a view
-    out = np.empty((pattern.height, pattern.width, 3))
-    tiled = grid.tiled_scale(pattern.width)
-    for start, stop, runs in _run_blocks(cy, FUSED_ROWS):
+    for start, stop, runs in _run_blocks(cy, rows):
         r0, r1 = first[start], first[stop - 1] + 4  # the grid rows the block's stencils take
         block = _cubic_rows(wx, by_grid_column[:, r0:r1], first[start:stop] - r0,
                             weights[start:stop])
         c0, c1 = runs[0][2], runs[-1][2] + 1  # the cells of the block's rows
         block_lo, block_hi = lo[c0:c1].take(cx, axis=1), hi[c0:c1].take(cx, axis=1)
-        for begin, end, i in runs:
+        for begin, end, i in runs:  # the rows of one grid cell share a range
             _clamp(block[begin - start:end - start], block_lo[i - c0], block_hi[i - c0])
-        grid.radiance_into(block, out[start:stop], tiled)
-    return out
+        yield start, stop, block
 
 
 def _cubic_rows(wx: sparse.csr_matrix, columns: np.ndarray, first: np.ndarray,
@@ -415,17 +422,6 @@ def stencil_ids_of(pattern: SamplePattern, grid_ids: np.ndarray) -> np.ndarray:
     fx, _ = cubic_weights(pattern.cols, pattern.width)
     stencil_id = np.where(_uniform_blocks(grid_ids, 4), grid_ids[: nr - 3, : nc - 3], -1)
     return stencil_id.take(fy, axis=0).take(fx, axis=1)  # two 1-D gathers
-
-
-def _cell_ranges(pattern: SamplePattern, grid_ids: np.ndarray,
-                 grid_values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(each image row's grid cell, the least and largest values of the 4 x 4
-    blocks (:func:`~mitsuba_mrt.recon.bounds.block_ranges`) at every image
-    column, (nr, width, C) each): what clamps the cubic."""
-    _, _, lo, hi = block_ranges(grid_ids, grid_values)
-    cy, _ = cell_coordinates(pattern.rows, pattern.height)
-    cx, _ = cell_coordinates(pattern.cols, pattern.width)
-    return cy, lo.take(cx, axis=1), hi.take(cx, axis=1)
 
 
 def _clamp(rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
