@@ -249,7 +249,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     begin = time.perf_counter()
     result = _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
     if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
-        auto.note_preview_after(preview_key, time.perf_counter() - begin)
+        auto.note_preview_after(preview_key, time.perf_counter() - begin,
+                                result.timings.denoise, width * height)
     if kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
         kept_plans.note_render(kept_key, tracer.spp, result.timings.total,
                                recordings() == recorded)

@@ -250,6 +250,14 @@ _probe_execute: dict = {}
 #: first uses.
 _preview_after_s: dict = {}
 PREVIEW_AFTER_CALLS = 3
+#: The seconds per image pixel that the stages after a preview's grid took
+#: beyond OIDN (the reconstruction, the finish), the last
+#: :data:`PREVIEW_RATE_CALLS` previews in this process, of any scene, with
+#: OIDN or without: the first preview of a scene in a process that has made
+#: others leaves their largest for them, OIDN's expected time on top, where
+#: that is less than :data:`FINISH_PER_PIXEL`'s fresh-process bound.
+_preview_rate: list = []
+PREVIEW_RATE_CALLS = 8
 #: The reason of a plan :func:`_again` takes (``{}``: the kept plan's).
 AGAIN_REASON = "{}; kept from this process's earlier render of the scene"
 #: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
@@ -590,37 +598,55 @@ def _filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params
                     started: float, key: tuple) -> AutoOutcome:
     """``outcome``, the preview, its grid pooled from as many 1-spp launches
     as end before the limit (its :data:`TIME_MARGIN`) less what the stages
-    after the grid are expected to take: the median of the last previews'
-    of ``key`` (:data:`_preview_after_s`), else :data:`FINISH_PER_PIXEL`'s
-    (before OIDN's first call at the preview's quality, that call's expected
-    time on top, which holds its set-up): :func:`.preview.preview_grid`.
-    Where those stages would end past :data:`PREVIEW_SLACK` times the limit
-    even right after the grid's first launch (a fresh process's first trace
-    and OIDN call), the preview goes without OIDN (:data:`UNDENOISED_NOTE`)."""
-    kept = _preview_after_s.get(key)
-    if kept:
-        after = typical(kept)
-    else:
-        quality = preset(params.denoise_quality)
-        after = FINISH_PER_PIXEL * pattern.width * pattern.height + (
-            expected_seconds(pattern.count, quality)
-            if denoise_seconds(pattern.count, quality) is None else 0.0)
+    after the grid are expected to take (:func:`_preview_after`):
+    :func:`.preview.preview_grid`.  Where those stages would end past
+    :data:`PREVIEW_SLACK` times the limit even right after the grid's first
+    launch (a fresh process's first trace and OIDN call), the preview goes
+    without OIDN (:data:`UNDENOISED_NOTE`)."""
+    after = _preview_after(key, pattern, params.denoise_quality)
     grid = preview_grid(outcome.grid, pattern, tracer,
                         started + TIME_MARGIN * params.time_limit - after)
     plan = outcome.plan
     plan.choice = replace(plan.choice, spp=grid.spp)
+    outcome = replace(outcome, grid=grid, preview_key=key)
     if time.perf_counter() + after > started + PREVIEW_SLACK * params.time_limit:
         plan.choice = replace(plan.choice, name=UNDENOISED.name, denoise=False)
         plan.notes.append(UNDENOISED_NOTE)
-        return replace(outcome, grid=grid)  # (its stages are not a preview's with OIDN)
-    return replace(outcome, grid=grid, preview_key=key)
+    return outcome
 
 
-def note_preview_after(key: tuple, seconds: float) -> None:
-    """Keep what the stages after a preview's grid took (``seconds``) for
-    the next preview of ``key`` (:data:`_preview_after_s`)."""
-    note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
-         PREVIEW_AFTER_CALLS)
+def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
+    """The seconds a preview's stages after its grid (OIDN on the grid, the
+    reconstruction, the finish) are expected to take: the median of the last
+    denoised previews' of ``key`` (:data:`_preview_after_s`); else
+    :data:`FINISH_PER_PIXEL`'s bound (before OIDN's first call at the
+    preview's quality, that call's expected time on top, which holds its
+    set-up), or where less, the largest time per pixel beyond OIDN of this
+    process's last previews (:data:`_preview_rate`) and OIDN's expected
+    time."""
+    kept = _preview_after_s.get(key)
+    if kept:
+        return typical(kept)
+    quality = preset(quality)
+    pixels = pattern.width * pattern.height
+    bound = FINISH_PER_PIXEL * pixels + (expected_seconds(pattern.count, quality)
+                                         if denoise_seconds(pattern.count, quality) is None
+                                         else 0.0)
+    if not _preview_rate:
+        return bound
+    return min(bound, max(_preview_rate) * pixels + expected_seconds(pattern.count, quality))
+
+
+def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int) -> None:
+    """Keep what the stages after a preview's grid took (``seconds``, of
+    which OIDN ``denoise``; 0 without OIDN) on an image of ``pixels``: for
+    the next preview of ``key`` where it was denoised
+    (:data:`_preview_after_s`), and as a time per pixel beyond OIDN for
+    the first preview of another scene (:data:`_preview_rate`)."""
+    if denoise > 0.0:
+        note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
+             PREVIEW_AFTER_CALLS)
+    note(_preview_rate, max(seconds - denoise, 0.0) / pixels, PREVIEW_RATE_CALLS)
 
 
 def scene_key(scene: mi.Scene, tracer, pixels: int) -> tuple:

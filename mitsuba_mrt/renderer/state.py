@@ -31,6 +31,7 @@ def clear_caches() -> None:
     auto._probe_recording_s.clear()
     auto._probe_execute.clear()
     auto._preview_after_s.clear()
+    auto._preview_rate.clear()
     kept_plans.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()

@@ -1139,19 +1139,52 @@ def test_a_stratified_pilot_reference_s_noise_is_its_halves_difference():
 
 def test_a_preview_leaves_its_later_stages_what_the_last_previews_took(scene, monkeypatch):
     monkeypatch.setattr(auto, "_preview_after_s", {})
+    monkeypatch.setattr(auto, "_preview_rate", [])
     monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
     for _ in range(3):  # (the grid's kernels recorded: a pooled launch replays them)
         mitsuba_mrt.render(scene, time_limit=10.0)
     (key,) = auto._preview_after_s
     auto._preview_after_s.clear()
+    auto._preview_rate.clear()
     first = mitsuba_mrt.render(scene, time_limit=10.0)
     # nothing kept: the bound per pixel, far below a 10-s limit on this image
     assert first.auto.reason == auto.PREVIEW_REASON and first.spp == PREVIEW_MAX_SPP
     (took,) = auto._preview_after_s[key]
     assert 0.0 < took < first.timings.total - first.timings.trace
+    # ... and its time per pixel beyond OIDN, for other scenes' first previews
+    pixels = first.image.shape[0] * first.image.shape[1]
+    (rate,) = auto._preview_rate
+    assert rate * pixels == pytest.approx(took - first.timings.denoise)
     # previews whose stages after the grid filled the limit: no launch pooled
     auto._preview_after_s[key] = [9.5, 9.6, 0.0]
     assert mitsuba_mrt.render(scene, time_limit=10.0).spp == 1
+
+
+def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(scene,
+                                                                            monkeypatch):
+    monkeypatch.setattr(auto, "_preview_after_s", {})
+    monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
+    monkeypatch.setattr(auto, "FINISH_PER_PIXEL", 1.0)  # a bound of days: never the least
+    for _ in range(2):  # (the grid's kernels recorded: a pooled launch replays them)
+        mitsuba_mrt.render(scene, time_limit=10.0)
+    pixels = 512 * 512
+    # other previews took a few ms on such an image: launches pooled, OIDN run
+    monkeypatch.setattr(auto, "_preview_rate", [1e-9, 1e-8])
+    auto._preview_after_s.clear()
+    filled = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert filled.auto.reason == auto.PREVIEW_REASON and filled.spp == PREVIEW_MAX_SPP
+    assert filled.auto.choice.denoise and len(auto._preview_after_s) == 1
+    # 20 s: past the limit's slack, the preview goes without OIDN; its time
+    # per pixel is kept for the next, but not as the scene's denoised stages
+    auto._preview_after_s.clear()
+    auto._preview_rate[:] = [20.0 / pixels]
+    bare = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert not bare.auto.choice.denoise and auto.UNDENOISED_NOTE in bare.auto.notes
+    assert not auto._preview_after_s and len(auto._preview_rate) == 2
+    assert auto._preview_rate[-1] * pixels < 10.0
+    # a process that has made no preview: the bound, here without OIDN
+    auto._preview_rate.clear()
+    assert not mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.denoise
 
 
 def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypatch):
