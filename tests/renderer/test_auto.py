@@ -1187,6 +1187,24 @@ def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(sc
     assert not mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.denoise
 
 
+def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
+    # with no pass measured in the process, the probe's guess of one is held to
+    # PROBED_SLACK times the limit, not PREVIEW_SLACK's
+    ends = []
+
+    def due(end, first_end, *args):
+        ends.append(end - first_end)
+        return True
+    monkeypatch.setattr(auto, "_preview_due", due)
+    for slack in (1.0, 3.0):
+        monkeypatch.setattr(auto, "_launch_costs", {})
+        monkeypatch.setattr(auto, "_first_round_s", {})
+        monkeypatch.setattr(auto, "PROBED_SLACK", slack)
+        mitsuba_mrt.render(scene, time_limit=10.0)
+    # (each render's start and its probe's end a second apart at most)
+    assert ends[-1] - ends[0] == pytest.approx(20.0, abs=1.0)
+
+
 def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypatch):
     from mitsuba_mrt.renderer import progressive
 
