@@ -118,6 +118,8 @@ def main():
     parser.add_argument("--out", help="also write NAME.csv here (--name)")
     parser.add_argument("--name", default="fresh_default")
     args = parser.parse_args()
+    if args.out:  # (made now: not a lost run at the end)
+        Path(args.out).mkdir(parents=True, exist_ok=True)
     import mitsuba_mrt
     mitsuba_mrt.activate("auto")
     rows = []
