@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .llvm_arrays import aligned, available  # noqa: F401 (available: asked by within_region)
+from .llvm_arrays import aligned
 
 
 #: Basis of the quadric, as powers (of x, of y) of the offsets from the cell's centre.

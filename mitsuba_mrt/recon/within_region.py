@@ -39,6 +39,7 @@ from . import quadric_jit
 from .bounds import (block_ranges, cell_row_runs, neighbourhood_ranges, power_of_two_scale,
                      suppress_fireflies)
 from .compose import albedo_constant_per_id, division_albedo, radiance_channels
+from .llvm_arrays import available
 from .sampling import SamplePattern, cell_coordinates
 
 
@@ -148,7 +149,7 @@ def local_poly_fit(pattern: SamplePattern, grid_ids: np.ndarray, grid_values: np
     centre_y = 0.5 * (rows[gy0] + rows[np.minimum(gy0 + 1, nr - 1)])
     centre_x = 0.5 * (cols[gx0] + cols[np.minimum(gx0 + 1, nc - 1)])
     if use_jit is None:
-        use_jit = quadric_jit.available()
+        use_jit = available()
     if use_jit:  # clamped in the kernel
         values = quadric_jit.quadric_values_jit(
             rows, cols, grid_ids, grid_values, gy0, gx0, gid, centre_y, centre_x, spacing,

@@ -557,7 +557,6 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     ``probed``: the grid probe, where :func:`_mrt_within` has made it;
     ``traced``: what it traced of every pixel."""
     width, height, limit = pattern.width, pattern.height, params.time_limit
-    end = started + PREVIEW_SLACK * limit
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
     launches = _launch_costs.get(key)
@@ -565,7 +564,8 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         # earlier passes measured a pass (a probe can record its kernels anew)
         first_s = time.perf_counter() - started + launches(launches.cheapest())
     if first_s is not None:
-        due = _preview_due(end, started + first_s, width * height, params.denoise_quality)
+        due = _preview_due(started + PREVIEW_SLACK * limit, started + first_s, width * height,
+                           params.denoise_quality)
         if due:  # (the next render asks the launches' line or a probe)
             _first_round_s.pop(key, None)
         return (AutoOutcome(preview) if due else None), None, False
