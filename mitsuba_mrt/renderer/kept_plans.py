@@ -16,8 +16,11 @@ for ``idpass``, a quarter for ``refine``) up to four times it: over that
 range its error beside the alternative's at equal time holds, and its time
 is a fixed part (the id pass, OIDN on the grid, the reconstruction) plus
 the growing traces.  An spp rendered before is expected to take what its
-replays took; another, what the checked render's split of its time says,
-and a little more for the recordings a new spp makes (:mod:`.replay`).  A
+replays took; another, the checked spp's typical time split as the checked
+renders split theirs (the growing traces' share of each render's own
+seconds: a first render's kernel compilations swell its traces and its
+total alike), and a little more for the recordings a new spp makes
+(:mod:`.replay`).  A
 sampler that bakes its spp into the kernels (:func:`.scene_query.sampler_bakes_spp`)
 would compile them at a new spp: there only the spp rendered before count.
 """
@@ -69,13 +72,13 @@ class KeptPlan:
     plan its check kept, or denoised passes) and what the MRT plan's
     renders took: per spp, the last :data:`PLAN_CALLS` renders' seconds (at
     another spp than the checked one, only renders that recorded nothing: a
-    replay's time); at the checked spp, their growing traces' seconds
-    (:data:`GROWING`).
+    replay's time); at the checked spp, their growing traces' share of
+    their seconds (:data:`GROWING`).
 
     Examples
     --------
     >>> plan = KeptPlan(Candidate("idpass+oidn", "mrt", 64, mode="idpass", denoise=True), "")
-    >>> plan.seconds[64], plan.growing = [0.2], [0.08]
+    >>> plan.seconds[64], plan.growing = [0.2], [0.4]
     >>> plan.expected(64), round(plan.expected(32), 3), round(plan.expected(128), 3)
     (0.2, 0.18, 0.308)
     >>> plan.spp_within(0.25, bakes=False), plan.spp_within(0.25, bakes=True)
@@ -94,9 +97,9 @@ class KeptPlan:
         if spp in self.seconds:
             return typical(self.seconds[spp])
         checked = self.choice.spp
-        share = spp / checked - 1.0
-        grows = typical(self.growing) * (share if share > 0 else (1.0 - LAUNCH_FIXED) * share)
-        return NEW_SPP_COST * (typical(self.seconds[checked]) + grows)
+        more = spp / checked - 1.0
+        grows = typical(self.growing) * (more if more > 0 else (1.0 - LAUNCH_FIXED) * more)
+        return NEW_SPP_COST * typical(self.seconds[checked]) * (1.0 + grows)
 
     def spp_within(self, seconds: float, bakes: bool) -> int | None:
         """The most spp expected to take at most ``seconds``, of those rendered
@@ -126,16 +129,16 @@ def spp_ladder(least: int, most: int) -> list[int]:
 def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
                  timings) -> None:
     """Keep what a render of ``choice`` (a plan its check kept, at its spp)
-    took for ``key``: ``seconds`` (its check left out) and the growing
-    traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`).  Another
-    plan for ``key`` starts anew."""
+    took for ``key``: ``seconds`` (its check left out) and the share of
+    them the growing traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`)
+    took.  Another plan for ``key`` starts anew."""
     kept = _plans.get(key)
     if kept is None or kept.choice.name != choice.name:  # (the key holds the spp)
         kept = KeptPlan(choice, reason)
     kept.choice, kept.reason = replace(choice, seconds=None), reason
     note(kept.seconds.setdefault(choice.spp, []), seconds, PLAN_CALLS)
-    note(kept.growing, sum(getattr(timings, part) for part in GROWING[choice.mode]),
-         PLAN_CALLS)
+    growing = sum(getattr(timings, part) for part in GROWING[choice.mode])
+    note(kept.growing, min(growing / seconds, 1.0) if seconds > 0 else 0.0, PLAN_CALLS)
     keep(_plans, key, kept, KEPT_PLANS)
 
 
