@@ -8,7 +8,8 @@ experiment measures, warm and alternating in one process, each round of
 repeats with its own seed (times: the median; errors: the mean): the full
 render at the scene's spp (time 1), the alternative's ladder, the default
 ``auto`` (planned anew, then taking that plan again), ``auto`` under time limits of
-:data:`LIMITS` of the full render, and each MRT configuration.  Errors are
+:data:`LIMITS` of the full render (each warmed up once too, once the full
+render's median sets it), and each MRT configuration.  Errors are
 against converged renders (:data:`CONVERGED_SPP`): the film's own filter
 for the full render and the MRT, a box filter for the denoised renders.
 Then, at ``auto``'s own time, the alternative's error (interpolated on its
@@ -159,6 +160,9 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     for share in LIMITS:  # each limit is relative to this process's full render
         key = f"auto --time-limit {share}"
         times[key], scores[key] = [], []
+        # warmed up as every method above: the process has rendered it once
+        # (traces recorded, OIDN's filters made at the sizes the plan uses)
+        render(scene, mode="auto", time_limit=share * full_s, seed=repeats)
         for seed in range(repeats):
             begin = time.perf_counter()
             out = render(scene, mode="auto", time_limit=share * full_s, seed=seed)

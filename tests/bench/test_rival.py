@@ -54,7 +54,15 @@ def test_rel_mse_weighs_dark_pixels_more():
     assert rel_mse(dark + 0.1, dark) > rel_mse(bright + 0.1, bright)
 
 
-def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant):
+def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant, monkeypatch):
+    from mitsuba_mrt.renderer import api
+
+    limits, render = [], api.render
+
+    def spy(*args, **kwargs):
+        limits.append(kwargs.get("time_limit"))
+        return render(*args, **kwargs)
+    monkeypatch.setattr(api, "render", spy)
     table = run_rival(tmp_path, [(ROOT / "scenes_xml" / "gallery" / "cornell.xml", "cornell",
                                   {"res": 32, "spp": 4})], repeats=1, quick=True,
                       command="test", echo=lambda line: None)
@@ -66,6 +74,9 @@ def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant):
     assert lines[0].split(",")[7] == "flip"
     assert {"full", "oidn@1", "oidn@4", "oidn-high@4", "auto", PLANNED, "fast", "refine+oidn",
             "auto --time-limit 0.1"} <= methods
+    # each limit warmed up once, as every other method, then its one timed repeat
+    timed = [limit for limit in limits if limit is not None]
+    assert len(timed) == 6 and timed[0] == timed[1] < timed[2] == timed[3] < timed[4]
 
 
 def test_flip_is_zero_for_the_same_image_and_grows_with_the_difference():
