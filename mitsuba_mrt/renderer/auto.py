@@ -127,11 +127,11 @@ BAKED_NOTE = ("the sampler bakes its sample count into its kernels: a pass at 1 
 #: taken instead: the preview's error is several times a pass's, and a limit
 #: is held to within 10 %.
 PREVIEW_SLACK = 1.1
-#: ... where the pass's time is the guess of a grid probe that recorded its
-#: kernels (the process's first trace of the scene's grid) rather than
-#: earlier passes' measure or a replayed probe's: a fresh process's first
-#: pass took 1.15-1.5 times the guess (``two_sensors`` at 256 px), so the
-#: pass and OIDN must be expected to end within the limit itself.
+#: ... where the pass's time is the grid probe's guess rather than earlier
+#: passes' measure: a fresh process's first pass took 1.15-1.5 times the
+#: guess (``two_sensors`` at 256 px), and in a warm process 1.1 times let
+#: 0.1 of the full render run 1.2-2x (``bench rival``), so the pass and OIDN
+#: must be expected to end within the limit itself.
 PROBED_SLACK = 1.0
 
 #: The plan, under the default target, where every surface is diffuse and
@@ -558,8 +558,8 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
                    ) -> tuple[AutoOutcome | None, tuple | None, bool]:
     """Under a time limit: (the preview's outcome where one pass and OIDN on
     the whole image would end after :data:`PREVIEW_SLACK` times the limit
-    (:data:`PROBED_SLACK` times, where a probe that recorded tells the pass's
-    time; the passes' recording counted the first time only,
+    (:data:`PROBED_SLACK` times, where a probe tells the pass's time; the
+    passes' recording counted the first time only,
     :data:`_recording_put_off`), else None; the passes' textured surfaces (:func:`_surfaces`) and whether
     they were looked up, which took time the question then counts).
     ``probed``: the grid probe, where :func:`_mrt_within` has made it;
@@ -578,7 +578,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
             _first_round_s.pop(key, None)
         return (AutoOutcome(preview) if due else None), None, False
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
-    end = started + (PROBED_SLACK if probed.recorded else PREVIEW_SLACK) * limit
+    end = started + PROBED_SLACK * limit
     grid, pass_s = probed.grid, probed.pass_s
     if launches is not None and launches.spp_compiles and launches.launches:
         # a sampler that bakes its spp launches only spp launched before: the
