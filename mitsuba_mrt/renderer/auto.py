@@ -128,10 +128,10 @@ BAKED_NOTE = ("the sampler bakes its sample count into its kernels: a pass at 1 
 #: is held to within 10 %.
 PREVIEW_SLACK = 1.1
 #: ... where the pass's time is the grid probe's guess rather than earlier
-#: passes' measure: a fresh process's first pass took 1.15-1.5 times the
-#: guess (``two_sensors`` at 256 px), and in a warm process 1.1 times let
-#: 0.1 of the full render run 1.2-2x (``bench rival``), so the pass and OIDN
-#: must be expected to end within the limit itself.
+#: passes' measure (the process's first passes of the scene): a fresh
+#: process's first pass took 1.15-1.5 times the guess (``two_sensors`` at
+#: 256 px), so the pass and OIDN must be expected to end within the limit
+#: itself.
 PROBED_SLACK = 1.0
 
 #: The plan, under the default target, where every surface is diffuse and
@@ -264,13 +264,6 @@ PREVIEW_AFTER_CALLS = 3
 #: that is less than :data:`FINISH_PER_PIXEL`'s fresh-process bound.
 _preview_rate: list = []
 PREVIEW_RATE_CALLS = 8
-#: The keys (as :data:`_launch_costs`', the last :data:`KEPT_COSTS`) whose
-#: time-limited render took the preview where one pass and OIDN would have
-#: ended in time but for the passes' first launch recording its kernels: the
-#: next such render takes the pass, once paying the recording that every
-#: later render replays (else each would take the preview again, its error
-#: several times a pass's).
-_recording_put_off: dict = {}
 #: The reason of a plan :func:`_again` takes (``{}``: the kept plan's).
 AGAIN_REASON = "{}; kept from this process's earlier render of the scene"
 #: The reason of a plan :func:`_measured_within` takes (``{}``: its kind's,
@@ -558,9 +551,8 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
                    ) -> tuple[AutoOutcome | None, tuple | None, bool]:
     """Under a time limit: (the preview's outcome where one pass and OIDN on
     the whole image would end after :data:`PREVIEW_SLACK` times the limit
-    (:data:`PROBED_SLACK` times, where a probe tells the pass's time; the
-    passes' recording counted the first time only,
-    :data:`_recording_put_off`), else None; the passes' textured surfaces (:func:`_surfaces`) and whether
+    (:data:`PROBED_SLACK` times, where a probe tells the pass's time),
+    else None; the passes' textured surfaces (:func:`_surfaces`) and whether
     they were looked up, which took time the question then counts).
     ``probed``: the grid probe, where :func:`_mrt_within` has made it;
     ``traced``: what it traced of every pixel."""
@@ -587,18 +579,11 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         # recorded launch may hold a compilation it could not tell apart)
         spp = launches.cheapest()
         pass_s = min(probed.host + spp * (probed.pass_s - probed.host), launches(spp))
-    recording_s = _passes_recording_s(key, probed)
+    pass_s += _passes_recording_s(key, probed)
 
     def due() -> bool:
-        ends = time.perf_counter() + pass_s
-        if not _preview_due(end, ends + recording_s, width * height, params.denoise_quality):
-            return False
-        if recording_s > 0.0 and not _preview_due(end, ends, width * height,
-                                                  params.denoise_quality):
-            if key in _recording_put_off:  # the second time: the pass, recorded
-                return False
-            _keep(_recording_put_off, key, True)
-        return True
+        return _preview_due(end, time.perf_counter() + pass_s, width * height,
+                            params.denoise_quality)
     if due():
         return AutoOutcome(preview, grid=grid), None, False
     # the passes' textured pixels, then the same question with their time spent

@@ -6,8 +6,7 @@ a filter or integrator made once per variant, the tables of the pixel
 filters, the OIDN device and filters, interpolation weights, and what the
 last renders took (OIDN's calls, ``auto``'s first round under a time
 limit, the passes' launches, the grid probe's recording, a preview's
-stages after its grid, the previews that put off the passes' recording,
-the checked MRT plans).  None of them
+stages after its grid, the checked MRT plans).  None of them
 changes a result, except that ``auto`` plans a time limit from those
 times.  :func:`clear_caches` drops them all, to free what they hold or to
 time a first call again; docs/ARCHITECTURE.md (Process-wide state) lists
@@ -33,7 +32,6 @@ def clear_caches() -> None:
     auto._probe_execute.clear()
     auto._preview_after_s.clear()
     auto._preview_rate.clear()
-    auto._recording_put_off.clear()
     kept_plans.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()

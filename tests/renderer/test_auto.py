@@ -1208,50 +1208,20 @@ def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(sc
 
 def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
     # with no pass measured in the process, the probe's guess of one is held to
-    # PROBED_SLACK times the limit, not PREVIEW_SLACK's, whether the probe
-    # recorded or replayed
-    ends, probe = [], auto._grid_probe
+    # PROBED_SLACK times the limit, not PREVIEW_SLACK's
+    ends = []
 
     def due(end, first_end, *args):
         ends.append(end - first_end)
         return True
     monkeypatch.setattr(auto, "_preview_due", due)
-    monkeypatch.setattr(auto, "PREVIEW_SLACK", 5.0)
-    for recorded, slack in ((True, 1.0), (True, 3.0), (False, 3.0)):
+    for slack in (1.0, 3.0):
         monkeypatch.setattr(auto, "_launch_costs", {})
         monkeypatch.setattr(auto, "_first_round_s", {})
-        monkeypatch.setattr(auto, "_probe_recording_s", {})
         monkeypatch.setattr(auto, "PROBED_SLACK", slack)
-        monkeypatch.setattr(auto, "_grid_probe",
-                            lambda *a, r=recorded: probe(*a)._replace(recorded=r))
         mitsuba_mrt.render(scene, time_limit=10.0)
     # (each render's start and its probe's end a second apart at most)
-    assert ends[1] - ends[0] == pytest.approx(20.0, abs=1.0)
-    assert ends[2] - ends[0] == pytest.approx(20.0, abs=1.0)
-
-
-def test_a_preview_put_off_the_passes_recording_once(scene, monkeypatch):
-    # the probe replays, the passes never launched: one pass and OIDN fit the
-    # limit but for the passes' recording; the first render takes the preview,
-    # the next the pass (recording it), and the one after that plans from it
-    probe = auto._grid_probe
-    monkeypatch.setattr(auto, "_grid_probe",
-                        lambda *a: probe(*a)._replace(recorded=False, pass_s=0.0))
-    monkeypatch.setattr(auto, "_launch_costs", {})
-    monkeypatch.setattr(auto, "_first_round_s", {})
-    monkeypatch.setattr(auto, "_recording_put_off", {})
-    monkeypatch.setattr(auto, "expected_seconds", lambda *a: 0.0)
-    monkeypatch.setattr(auto, "_passes_recording_s", lambda *a: 1e3)
-    first = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert first.auto.reason == auto.PREVIEW_REASON and len(auto._recording_put_off) == 1
-    second = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert second.auto.choice.kind == "denoised" and auto._launch_costs
-    # a recording that would end the pass past the limit even without it is no reason
-    monkeypatch.setattr(auto, "_grid_probe",
-                        lambda *a: probe(*a)._replace(recorded=False, pass_s=1e3))
-    monkeypatch.setattr(auto, "_launch_costs", {})
-    monkeypatch.setattr(auto, "_first_round_s", {})
-    assert mitsuba_mrt.render(scene, time_limit=10.0).auto.reason == auto.PREVIEW_REASON
+    assert ends[-1] - ends[0] == pytest.approx(20.0, abs=1.0)
 
 
 def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypatch):
