@@ -636,13 +636,10 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
     if kept:
         return typical(kept)
     quality = preset(quality)
-    pixels = pattern.width * pattern.height
-    bound = FINISH_PER_PIXEL * pixels + (expected_seconds(pattern.count, quality)
-                                         if denoise_seconds(pattern.count, quality) is None
-                                         else 0.0)
-    if not _preview_rate:
-        return bound
-    return min(bound, max(_preview_rate) * pixels + expected_seconds(pattern.count, quality))
+    pixels, oidn = pattern.width * pattern.height, expected_seconds(pattern.count, quality)
+    first_call = denoise_seconds(pattern.count, quality) is None
+    bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)
+    return min(bound, max(_preview_rate) * pixels + oidn) if _preview_rate else bound
 
 
 def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int) -> None:

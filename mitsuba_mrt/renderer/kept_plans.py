@@ -20,9 +20,9 @@ replays took; another, the checked spp's typical time split as the checked
 renders split theirs (the growing traces' share of each render's own
 seconds: a first render's kernel compilations swell its traces and its
 total alike), and a little more for the recordings a new spp makes
-(:mod:`.replay`).  A
-sampler that bakes its spp into the kernels (:func:`.scene_query.sampler_bakes_spp`)
-would compile them at a new spp: there only the spp rendered before count.
+(:mod:`.replay`).  A sampler that bakes its spp into the kernels
+(:func:`.scene_query.sampler_bakes_spp`) would compile them at a new spp:
+there only the spp rendered before count.
 """
 
 from __future__ import annotations
