@@ -117,14 +117,15 @@ class GridTracer:
     def __call__(self, pixel_xy: np.ndarray, *, stream: SeedStream = SeedStream.EDGES,
                  aovs: bool = True, radiance: bool = True, replay: bool = False,
                  pad: bool = False, box: bool = False, ids: bool = True,
-                 albedo: bool = True, halves: bool = False) -> SparseTrace:
+                 albedo: bool = True, halves: bool = False,
+                 variance: bool = True) -> SparseTrace:
         known = self.id_pass
         if (known is not None and stream == SeedStream.ID_PASS and aovs and not radiance
                 and ids and albedo and not box and len(pixel_xy) == len(known.shape_index)):
             return known
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
                             self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
-                            albedo, halves)
+                            albedo, halves, variance)
 
 
 def _check_spp(spp: int | None) -> int | None:
@@ -335,7 +336,8 @@ def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
     tracer = GridTracer(scene, sensor, unwrap(scene, integrator).nested, spp, seed)
     width, height = (int(v) for v in sensor.film().crop_size())
     xy = every_pixel(width, height)
-    trace = tracer(xy, stream=SeedStream.GRID, aovs=True, ids=False, replay=True, box=True)
+    trace = tracer(xy, stream=SeedStream.GRID, aovs=True, ids=False, replay=True, box=True,
+                   variance=False)
     check_radiance(trace.radiance, "pixels")
     image = denoise_image(*(v.reshape(height, width, 3)
                             for v in (trace.radiance, trace.albedo, trace.normal)),

@@ -231,7 +231,8 @@ def _aligned(values: np.ndarray, dtype=np.float32):
 
 
 def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo, replay,
-                 box=False, sources=None, halves=False, normals=True, albedo_samples=0):
+                 box=False, sources=None, halves=False, normals=True, albedo_samples=0,
+                 variance=True):
     """Trace ``spp`` samples of every pixel in one wavefront and develop them.
 
     Every pixel of the image: as ``mi.render`` does (uniform over each pixel,
@@ -248,7 +249,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     ``albedo_samples`` (not where the samples are splatted or a filter's
     negative lobe weighs them -1), only each pixel's first that many samples
     trace the albedo, and ``albedo_varies`` says whether they disagreed (or
-    some missed every surface).
+    some missed every surface).  Without ``variance`` (where no stage reads
+    it) each pixel's variance is not worked out from its sums, and is zero.
     """
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
@@ -286,7 +288,7 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
             sums[k] = row
         return _read_sums(sums, integrator is not None)
     return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves),
-                     bool(albedo and normals), bool(few))
+                     bool(albedo and normals), bool(few), variance)
 
 
 def filter_cell(u, cdf, first, steps: int, cells: int):
@@ -478,9 +480,10 @@ def _packed(channels: list, n: int):
 
 
 def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
-              normals: bool = True, few: bool = False) -> _Developed:
+              normals: bool = True, few: bool = False, variance: bool = True) -> _Developed:
     """The :class:`_Developed` of :func:`_packed`'s array of
-    :func:`_developed_channels` (float64 fields; zeros where not traced)."""
+    :func:`_developed_channels` (float64 fields; zeros where not traced, or
+    for the variance, not asked for)."""
     values, at = np.asarray(packed, dtype=np.float64).reshape(n, -1), [0]
 
     def take(k):  # the next k channels (views of one conversion)
@@ -491,7 +494,8 @@ def _unpacked(packed, n: int, radiance: bool, albedo: bool, halves: bool,
     # (zeros of their own, not copies: untraced fields cost no memory until written)
     rgb, alpha, second = (take(3), take(1).reshape(n), take(3)) if radiance else (
         np.zeros((n, 3)), np.zeros(n), None)
-    variance = np.zeros((n, 3)) if second is None else sample_variance(second, rgb)
+    variance = (sample_variance(second, rgb) if second is not None and variance
+                else np.zeros((n, 3)))
     guide = (take(3), take(3) if normals else np.zeros((n, 3))) if albedo else (
         np.zeros((n, 3)), np.zeros((n, 3)))
     odd = take(3) if halves else None
@@ -525,10 +529,11 @@ def box_filter():
 
 def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
                     replay=False, box=False, sources=None, halves=False, normals=True,
-                    albedo_samples=0):
+                    albedo_samples=0, variance=True):
     """The scalar variant's :func:`_develop_jit`: sample by sample in Python
-    (the normals are developed whatever ``normals`` says, and every sample's
-    albedo whatever ``albedo_samples`` says)."""
+    (the variance and the normals are developed whatever ``variance`` and
+    ``normals`` say, and every sample's albedo whatever ``albedo_samples``
+    says)."""
     film = sensor.film()
     width, height = (int(v) for v in film.crop_size())
     rfilter = box_filter() if box else film.rfilter()

@@ -126,11 +126,14 @@ class Passes:
     ``square``, the sums of each trace's pixel means and of its samples'
     squares, means and variances clipped likewise.  ``guides`` counts the
     samples that traced the guides, ``guide_spp`` how many should.  Counts
-    are samples per pixel.  With ``companion`` (a sampler that stratifies a
-    pixel's samples: its odd and even ones are no independent halves) every
-    launch goes into half 0, and half 1 is the same launch's samples, in lanes
-    of their own, of the pixels of ``crop`` at the positions ``companion``
-    (every other row: :meth:`add_companion`); the estimates read those alone.
+    are samples per pixel.  Without ``estimated`` (nothing is estimated: a
+    time limit alone, a plan an earlier render measured) only the image,
+    the guides and alpha are summed, and the traces need no variance.  With
+    ``companion`` (a sampler that stratifies a pixel's samples: its odd and
+    even ones are no independent halves) every launch goes into half 0, and
+    half 1 is the same launch's samples, in lanes of their own, of the
+    pixels of ``crop`` at the positions ``companion`` (every other row:
+    :meth:`add_companion`); the estimates read those alone.
     """
 
     crop: np.ndarray
@@ -147,20 +150,35 @@ class Passes:
     alpha: np.ndarray | None = None
     textured: np.ndarray | None = None
     companion: np.ndarray | None = None
+    estimated: bool = True
 
     def add(self, trace, half: int | None, guides: bool) -> None:
         """Add ``trace`` (every pixel, at its spp) to half 0 or 1, or, for
         ``half`` None, its even-numbered samples to half 0 and its odd ones
-        (``trace.odd``) to half 1."""
+        (``trace.odd``) to half 1 (the halves and the variance only where
+        :attr:`estimated`)."""
+        spp, n = trace.spp, len(trace.radiance)
+        self.total = _plus(self.total, spp, trace.radiance)
+        if self.estimated:
+            self._add_estimates(trace, half)
+        if guides:
+            self.albedo = _plus(self.albedo, spp, trace.albedo)
+            self.normal = _plus(self.normal, spp, trace.normal)
+            self.guides += spp
+        if trace.alpha is not None:
+            self.alpha = _plus(self.alpha, spp, trace.alpha)
+        self.albedo = np.zeros((n, 3)) if self.albedo is None else self.albedo
+        self.normal = np.zeros((n, 3)) if self.normal is None else self.normal
+        self.alpha = np.zeros(n) if self.alpha is None else self.alpha
+        self.count += spp
+
+    def _add_estimates(self, trace, half: int | None) -> None:
+        """:meth:`add`'s sums over ``crop`` for the estimates."""
         spp, radiance = trace.spp, trace.radiance
-        if self.count == 0:
-            self.total = np.zeros_like(radiance)
+        if not self.halves:
             self.halves = [np.zeros((len(self.crop), 3)), np.zeros((len(self.crop), 3))]
             self.square = np.zeros((len(self.crop), 3))
             self.clipped = np.zeros((len(self.crop), 3))
-            self.albedo, self.normal = np.zeros_like(radiance), np.zeros_like(radiance)
-            self.alpha = np.zeros(len(radiance))
-        self.total += spp * radiance
         clipped = np.minimum(radiance[self.crop], ESTIMATE_CLIP)
         if half is None:
             odd_spp = spp // 2
@@ -175,13 +193,6 @@ class Passes:
         self.square += spp * (np.minimum(trace.variance[self.crop], ESTIMATE_CLIP ** 2)
                               + clipped ** 2)
         self.clipped += spp * clipped
-        if guides:
-            self.albedo += spp * trace.albedo
-            self.normal += spp * trace.normal
-            self.guides += spp
-        if trace.alpha is not None:
-            self.alpha += spp * trace.alpha
-        self.count += spp
 
     def add_companion(self, trace) -> None:
         """Add ``trace`` (the pixels ``crop[companion]``, independent of the
@@ -242,6 +253,15 @@ class Passes:
         mean = self.clipped / self.count
         return np.maximum(self.square / self.count - mean ** 2, 0.0) * (
             self.count / max(self.count - 1, 1))
+
+
+def _plus(total: np.ndarray | None, spp: int, values: np.ndarray) -> np.ndarray:
+    """``total`` (None: nothing yet) plus ``spp`` times ``values``, in place
+    where there is a total."""
+    if total is None:
+        return spp * values
+    total += spp * values
+    return total
 
 
 @dataclass
@@ -405,7 +425,8 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     pixels = np.concatenate([xy, xy[passes.crop[passes.companion]]]) if companion else xy
     trace = replace(tracer, spp=spp)(pixels, stream=SeedStream.LADDER + launch, aovs=guides,
                                      ids=False, box=True, replay=True,
-                                     halves=half is None and not companion)
+                                     halves=half is None and not companion,
+                                     variance=passes.estimated)
     if not companion:
         passes.add(trace, half, guides)
         return 1.0
@@ -745,6 +766,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # replay their kernels (a new spp's compilation is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not fixed and not (deadline is not None and target_error is None)
+    passes.estimated = estimates
     # a sampler that bakes its spp stratifies a pixel's samples: the estimates
     # take every other row of the strips again, in the same launches
     if estimates and bakes:

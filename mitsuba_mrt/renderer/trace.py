@@ -43,7 +43,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                  pixel_xy: np.ndarray, spp: int, seed: int = 0, aovs: bool = True,
                  radiance: bool = True, replay: bool = False,
                  pad: bool = False, box: bool = False, ids: bool = True,
-                 albedo: bool = True, halves: bool = False) -> SparseTrace:
+                 albedo: bool = True, halves: bool = False,
+                 variance: bool = True) -> SparseTrace:
     """Render only ``pixel_xy`` with ``integrator``, plus the id AOVs.
 
     Parameters
@@ -94,6 +95,9 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         Also the mean radiance of each pixel's odd-numbered samples
         (``odd``): with the even-numbered ones, two estimates of the pixel
         from one launch (independent for the ``independent`` sampler).
+    variance : bool
+        Also each pixel's sample variance (``variance``; None without it,
+        where no stage reads it).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
         raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
@@ -104,11 +108,11 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     if n == 0 and is_jit():  # Dr.Jit aborts the process on a launch of no lanes
         return trace_pixels(scene, sensor, integrator, np.zeros((1, 2), np.int64), spp, seed,
                             aovs, radiance, box=box, ids=ids, albedo=albedo,
-                            halves=halves).take(slice(0, 0))
+                            halves=halves, variance=variance).take(slice(0, 0))
     if pad and n and is_jit() and replay_active() and replayable(scene):
         return trace_pixels(scene, sensor, integrator, _padded(pixel_xy), spp, seed, aovs,
                             radiance, replay=True, box=box, ids=ids, albedo=albedo,
-                            halves=halves).take(slice(0, n))
+                            halves=halves, variance=variance).take(slice(0, n))
     start = time.perf_counter()
     lights = tracked_lights(scene)
     rule = shadow_rule(scene, lights)
@@ -120,7 +124,7 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
     one_colour = aovs and albedo_per_shape(scene)
     if radiance:
         samples = _samples(develop, scene, sensor, integrator, sampler, pixel_xy, spp, seed,
-                           aovs and albedo, replay, box, halves, ids, one_colour)
+                           aovs and albedo, replay, box, halves, ids, one_colour, variance)
     shape_index, visible, path_id, normal = zero, np.zeros(n, np.uint32), zero, None
     if aovs and ids:
         shape_index, visible, path_id, normal, back = (_ids_jit if is_jit() else _ids_scalar)(
@@ -149,7 +153,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        shadow_rays=rule == "rays", path_id=path_id,
                        curved_mirror=np.isin(shape_index, curved) if len(curved) else None,
                        alpha=samples.alpha if radiance else None,
-                       variance=samples.variance if radiance else None, normal=normal,
+                       variance=samples.variance if radiance and variance else None,
+                       normal=normal,
                        odd=samples.odd if radiance else None, albedo_per_shape=one_colour,
                        emitter=np.isin(shape_index, lit) if len(lit) else None,
                        filter_reach=0 if box else filter_reach(sensor.film().rfilter().radius()))
@@ -168,7 +173,7 @@ def trace_shapes(scene: mi.Scene, sensor: mi.Sensor, pixel_xy: np.ndarray,
 
 def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, spp: int,
              seed: int, albedo: bool, replay: bool, box: bool, halves: bool,
-             ids: bool, one_colour: bool) -> _Developed:
+             ids: bool, one_colour: bool, variance: bool = True) -> _Developed:
     """The developed samples of ``pixel_xy``, their albedo (with ``albedo``)
     from as few samples as it needs: where every shape's albedo is one colour
     (``one_colour``: :func:`.scene_query.albedo_per_shape`) and the ids give
@@ -178,7 +183,8 @@ def _samples(develop, scene, sensor, integrator, sampler, pixel_xy: np.ndarray, 
     few = (ALBEDO_FIRST_SAMPLES if one_colour and albedo and ids and not halves and is_jit()
            else 0)
     samples = develop(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo,
-                      replay, box, halves=halves, normals=not ids, albedo_samples=few)
+                      replay, box, halves=halves, normals=not ids, albedo_samples=few,
+                      variance=variance)
     if spp <= few or samples.albedo_varies is None or not samples.albedo_varies.any():
         return samples  # (every sample traced its albedo, or they all agreed)
     again = np.flatnonzero(samples.albedo_varies)

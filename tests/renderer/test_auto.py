@@ -4,6 +4,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -1075,6 +1076,31 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
                            deadline=10.0, max_spp=64, full_spp=16, area=1.0, denoise=False,
                            cost=progressive.LaunchCost([(1, 2.0, False)], spp_compiles=True))
     assert launched == [1, 1, 1, 1] and clock[0] <= 10.0
+
+
+def test_passes_that_estimate_nothing_ask_their_traces_for_no_variance(timed_tracer):
+    # a time limit alone and a plan an earlier render measured read no
+    # variance: working it out is a few ms of a launch of every pixel
+    from mitsuba_mrt.renderer import progressive
+
+    Tracer, launched, clock = timed_tracer
+    asked = []
+
+    class Spy(Tracer):
+        def __call__(self, xy, **kwargs):
+            asked.append(kwargs["variance"])
+            trace = super().__call__(xy, **kwargs)
+            return replace(trace, variance=None) if not kwargs["variance"] else trace
+    common = dict(quality="fast", max_spp=8, full_spp=8, area=1.0, denoise=False)
+    progressive.run_passes(Spy(), 2, 2, target_error=None, deadline=None, fixed=True, **common)
+    progressive.run_passes(Spy(), 2, 2, target_error=None, deadline=clock[0] + 20.0,
+                           cost=progressive.LaunchCost([(1, 2.0, False), (2, 3.0, False)]),
+                           **common)
+    assert asked and not any(asked)
+    asked.clear()
+    # the estimates read it
+    progressive.run_passes(Spy(), 2, 2, target_error=0.01, deadline=None, **common)
+    assert asked and all(asked)
 
 
 @pytest.mark.parametrize("sampler", ["independent", "stratified"])

@@ -246,3 +246,16 @@ def test_another_spp_compiles_no_kernel(mode):
     second = mitsuba_mrt.render(scene, mode=mode, spp=5, sample_fraction=0.2)
     assert (second.timings.compile.compiled, second.timings.compile.from_disk) == (0, 0)
     assert second.spp == 5
+
+
+def test_a_trace_without_its_variance_has_the_same_values():
+    # (the passes that estimate nothing ask for none: the kernels are the same)
+    scene = mi.load_string(PATH_SCENE)
+    xy = np.stack(np.meshgrid(np.arange(24), np.arange(24)), -1).reshape(-1, 2)
+    kwargs = dict(box=True, ids=False)
+    with_it = _trace(scene, scene.integrator(), xy, True, **kwargs)
+    without = _trace(scene, scene.integrator(), xy, True, variance=False, **kwargs)
+    assert without.variance is None and with_it.variance.any()
+    for a, b in zip(_fields(with_it), _fields(without)):
+        if b is not None:
+            np.testing.assert_array_equal(a, b)
