@@ -35,7 +35,7 @@ from .pilot import effective_area
 from .pipeline import mrt_image
 from .replay import recordings
 from .scene import resolve_sensor, unwrap
-from .trace import trace_pixels
+from .trace import pass_recorded, trace_pixels
 
 # Intel Open Image Denoise's module, where installed, loads with the renderer:
 # its import (tens of milliseconds, mostly reading package metadata) is then
@@ -126,6 +126,12 @@ class GridTracer:
         return trace_pixels(self.scene, self.sensor, self.integrator, pixel_xy, self.spp,
                             self.seed + int(stream), aovs, radiance, replay, pad, box, ids,
                             albedo, halves, variance)
+
+    def pass_recorded(self, spp: int, guides: bool = True, halves: bool = False) -> bool:
+        """Whether a trace of every pixel at ``spp``, as the passes launch
+        it (with the ``guides``, the odd samples apart where ``halves``),
+        would replay a recording: :func:`~.trace.pass_recorded`."""
+        return pass_recorded(self.scene, self.sensor, self.integrator, spp, guides, halves)
 
 
 def _check_spp(spp: int | None) -> int | None:

@@ -534,9 +534,13 @@ def _too_many_edges(ids: np.ndarray, width: int, height: int, notes: list) -> bo
 
 def _kept_cost(key: tuple, tracer) -> LaunchCost:
     """The launches kept for ``key`` (new where there are none, of
-    ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`."""
-    return _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
+    ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
+    a 1-spp launch among its :attr:`~.progressive.LaunchCost.replays` where
+    another trace recorded its layout (a full render denoised, at 1 spp)."""
+    cost = _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
         spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))
+    cost.replays = frozenset([1] if tracer.pass_recorded(1) else [])
+    return cost
 
 
 def _keep(table: dict, key: tuple, value):
@@ -559,7 +563,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     width, height, limit = pattern.width, pattern.height, params.time_limit
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
-    launches = _launch_costs.get(key)
+    launches = _kept_cost(key, tracer)
     if first_s is None and launches is not None and launches.replayed:
         # earlier passes measured a pass (a probe can record its kernels anew)
         first_s = time.perf_counter() - started + launches(launches.cheapest())
@@ -686,7 +690,8 @@ def _measured_within(key: tuple, started: float, limit: float, notes: list,
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
     """What the passes' first launch for ``key`` is expected to add to the
     pass ``probed`` predicts by recording its kernels: 0 where the passes have
-    launched for ``key`` before (they replay) or the probe itself recorded
+    launched for ``key`` before or another trace recorded their 1-spp launch
+    (they replay) or the probe itself recorded
     (its time holds a recording); else what the probe's recording took
     beyond its replays (:data:`_probe_recording_s`), kept from the render
     whose probe recorded, less what compiling kernels took of it: a kernel
@@ -696,7 +701,7 @@ def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
         _keep(_probe_recording_s, key, probed.host - probed.compile)
         return 0.0
     launches = _launch_costs.get(key)
-    if launches is not None and launches.launches:
+    if launches is not None and (launches.launches or 1 in launches.replays):
         return 0.0
     return max(_probe_recording_s.get(key, 0.0) - probed.host, 0.0)
 

@@ -265,14 +265,9 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
            and not table.negative and albedo_samples > 0 else 0)
     read = _read_channels(integrator is not None, bool(albedo), bool(normals), bool(halves),
                           bool(few))
-    first, steps = table.guide
-    steps = None if table.uniform else steps
-    # what the kernels bake in, so that a recording is replayed only where it holds
-    layout = (n, int(spp), integrator is not None, bool(albedo), every, splat, width, height,
-              tuple(int(v) for v in film.crop_offset()), bool(film.sample_border()),
-              float(table.radius), len(table.pdf), steps, bool(box),
-              MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
-              bool(albedo and normals), few)
+    first = table.guide[0]
+    layout = _layout(scene, sensor, integrator, n, spp, albedo, every, splat, table, box,
+                     halves, normals, few)
     sums = _DEVELOP(scene, sensor, integrator, _aligned(traced[:, 0]),
                     _aligned(traced[:, 1]), _aligned(table.cdf),
                     _aligned(first, np.uint32),
@@ -289,6 +284,36 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
         return _read_sums(sums, integrator is not None)
     return _unpacked(sums, n, integrator is not None, bool(albedo), bool(halves),
                      bool(albedo and normals), bool(few), variance)
+
+
+def _layout(scene, sensor, integrator, n: int, spp: int, albedo, every: bool, splat: bool,
+            table, box: bool, halves, normals, few: int) -> tuple:
+    """What :func:`_develop_kernel` bakes in (its ``layout``), so that a
+    recording is replayed only where it holds."""
+    film = sensor.film()
+    steps = None if table.uniform else table.guide[1]
+    return (n, int(spp), integrator is not None, bool(albedo), every, splat,
+            *(int(v) for v in film.crop_size()), tuple(int(v) for v in film.crop_offset()),
+            bool(film.sample_border()), float(table.radius), len(table.pdf), steps, bool(box),
+            MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
+            bool(albedo and normals), few)
+
+
+def every_pixel_recorded(scene, sensor, integrator, spp: int, albedo: bool,
+                         halves: bool) -> bool:
+    """Whether :func:`_develop_jit` has a recording to replay for every pixel
+    at ``spp`` through a box filter (the albedo and normals where
+    ``albedo``, the odd samples apart where ``halves``): a trace of that
+    layout ran before in this process, so its kernels exist."""
+    width, height = (int(v) for v in sensor.film().crop_size())
+    objects = (scene, sensor, integrator)
+    # (a layout's first values: its pixel count and spp; the rest is worked
+    # out, its filter's table made, only where a recording has those)
+    if all(layout[:2] != (width * height, spp) for layout in _DEVELOP.layouts(objects)):
+        return False
+    layout = _layout(scene, sensor, integrator, width * height, spp, albedo, True, False,
+                     filter_table(box_filter()), True, halves, True, 0)
+    return _DEVELOP.recorded(objects, layout)
 
 
 def filter_cell(u, cdf, first, steps: int, cells: int):

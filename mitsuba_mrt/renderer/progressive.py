@@ -546,6 +546,10 @@ class LaunchCost:
 
     launches: list = field(default_factory=list)
     spp_compiles: bool = False
+    #: spp whose launch has a recording already (another trace of the same
+    #: layout made it: :meth:`~.api.GridTracer.pass_recorded`): it records
+    #: nothing anew, and compiles nothing where ``spp_compiles``.
+    replays: frozenset = frozenset()
 
     def __post_init__(self):
         self.launches = [Launch(*launch) for launch in self.launches]
@@ -622,11 +626,11 @@ class LaunchCost:
         return max(last.seconds - fixed - per_spp * last.spp, 0.0)
 
     def _new(self, spp: int) -> bool:
-        return all(spp != launch.spp for launch in self.launches)
+        return spp not in self.replays and all(spp != launch.spp for launch in self.launches)
 
     def _unplanned(self, spp: int) -> bool:
-        """Whether ``spp`` is not planned: a new spp where it compiles
-        (``spp_compiles``) and some spp has been launched.  Whether its
+        """Whether ``spp`` is not planned: a new spp (not in :attr:`replays`)
+        where it compiles (``spp_compiles``) and some spp has been launched.  Whether its
         kernels come from Dr.Jit's disk cache or compile (several seconds
         for some scenes) no recording tells."""
         return self.spp_compiles and bool(self.launches) and self._new(spp)
@@ -640,20 +644,22 @@ class LaunchCost:
         return fixed + per_spp * spp + (self.record_s if self._new(spp) else 0.0)
 
     def cheapest(self) -> int:
-        """The spp of the launch expected to cost least, of 1 and those
-        launched before (only those where a new spp compiles)."""
-        sizes = [1] + [launch.spp for launch in self.launches]
+        """The spp of the launch expected to cost least, of 1, those
+        launched before and :attr:`replays` (only those two where a new spp
+        compiles)."""
+        sizes = [1, *self.replays] + [launch.spp for launch in self.launches]
         return min((spp for spp in sizes if not self._unplanned(spp)),
                    key=lambda spp: (self(spp), spp))
 
     def fits(self, seconds: float) -> int:
         """The most spp a launch expected to take at most ``seconds`` may
-        have (only those launched before where a new spp compiles)."""
+        have (only those launched before or in :attr:`replays` where a new
+        spp compiles)."""
         fixed, per_spp = self._line()
         if per_spp <= 0:
             return 0
-        launched = [launch.spp for launch in self.launches
-                    if fixed + per_spp * launch.spp <= seconds]
+        launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
+                    if fixed + per_spp * spp <= seconds]
         anew = [] if self.spp_compiles and self.launches else [
             int((seconds - self.record_s - fixed) // per_spp)]
         return max(launched + anew + [0])

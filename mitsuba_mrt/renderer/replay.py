@@ -160,6 +160,17 @@ class Replay:
         self._failed.clear()
         self._dropped = 0
 
+    def recorded(self, objects: tuple, layout: tuple) -> bool:
+        """Whether a call with these ``objects`` and ``layout`` would replay
+        a recording (one was made, and replays are on)."""
+        frozen = self.frozen.get((token(objects), layout))
+        return _replaying[-1] and frozen is not None and frozen.n_recordings > 0
+
+    def layouts(self, objects: tuple) -> list[tuple]:
+        """The layouts recorded for these ``objects`` (kept, or being recorded)."""
+        held = token(objects)
+        return [layout for owner, layout in self.frozen if owner == held]
+
     def __call__(self, *args, objects: tuple, record: bool):
         """``kernel(*args)``; with ``record``, from the recording for these
         ``objects`` (the Mitsuba objects among ``args``) and layout

@@ -18,7 +18,8 @@ import numpy as np
 from ..errors import MRTError
 from ..types import SparseTrace
 from .albedo_pass import albedo_pass
-from .develop import ALBEDO_FIRST_SAMPLES, _develop_jit, _develop_scalar, _Developed
+from .develop import (ALBEDO_FIRST_SAMPLES, _develop_jit, _develop_scalar, _Developed,
+                      every_pixel_recorded)
 from .ids import _ids_jit, _ids_scalar, shape_indices
 from .lanes import is_jit
 from .replay import active as replay_active
@@ -158,6 +159,19 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
                        odd=samples.odd if radiance else None, albedo_per_shape=one_colour,
                        emitter=np.isin(shape_index, lit) if len(lit) else None,
                        filter_reach=0 if box else filter_reach(sensor.film().rfilter().radius()))
+
+
+def pass_recorded(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator, spp: int,
+                  albedo: bool = True, halves: bool = False) -> bool:
+    """Whether :func:`trace_pixels` of every pixel at ``spp`` (``box``,
+    no ids, ``replay``; ``aovs`` and ``albedo`` as ``albedo``, ``halves``)
+    would replay a recording: one such trace ran before in this process, so
+    its kernels are compiled (a sampler that bakes its spp into them
+    compiles them anew at a new spp)."""
+    if not (is_jit() and replay_active() and replayable(scene)):
+        return False
+    taken = set_sample_count(sensor.sampler().clone(), spp)
+    return every_pixel_recorded(scene, sensor, integrator, taken, albedo, halves)
 
 
 def trace_shapes(scene: mi.Scene, sensor: mi.Sensor, pixel_xy: np.ndarray,

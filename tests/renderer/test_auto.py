@@ -576,9 +576,16 @@ def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_laun
     # a recording that compiled a kernel keeps its time less the compilation
     assert auto._passes_recording_s(key, probe(True, 0.330, compile=0.300)) == 0.0
     assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
-    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"))
+    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
+                             pass_recorded=lambda spp: False)
     auto._kept_cost(key, tracer).add(1, 0.02, recorded=True)
     assert auto._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
+    # another trace (a full render denoised at 1 spp) recorded the passes' first launch
+    other = ("scene 2",) + key[1:]
+    assert auto._passes_recording_s(other, probe(True, 0.030)) == 0.0
+    assert auto._passes_recording_s(other, probe(False, 0.004)) == pytest.approx(0.026)
+    auto._kept_cost(other, SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp: spp == 1))
+    assert auto._passes_recording_s(other, probe(False, 0.004)) == 0.0
 
 
 def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
@@ -1252,6 +1259,7 @@ def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
 
 def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypatch):
     from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.renderer.api import GridTracer
 
     monkeypatch.setattr(auto, "_launch_costs", {})
     monkeypatch.setattr(auto, "_first_round_s", {})
@@ -1262,9 +1270,14 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
                                                             spp_compiles=True)
     assert cost(1) == math.inf and cost.cheapest() == 9
     auto._first_round_s.clear()
+    # (the first render's 1-spp launches recorded: as if they had not)
+    monkeypatch.setattr(GridTracer, "pass_recorded", lambda self, spp, **_: False)
     preview = mitsuba_mrt.render(scene, time_limit=1e-6)
     assert preview.auto.reason == auto.PREVIEW_REASON
     assert auto.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes
+    # where a trace recorded the passes' 1-spp launch (its kernels exist), it is planned
+    replayed = progressive.LaunchCost(cost.launches, spp_compiles=True, replays=frozenset([1]))
+    assert replayed.cheapest() == 1 and replayed(1) < replayed(9) and replayed.fits(0.1) == 1
     # an independent sampler plans a pass of any spp: no such note
     plain = mitsuba_mrt.render(mi.load_string(scene_xml(64, spp=16)), time_limit=1e-6)
     assert not any("bakes" in note for note in plain.auto.notes)

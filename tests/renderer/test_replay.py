@@ -6,7 +6,7 @@ import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt import grid_pattern
-from mitsuba_mrt.renderer.replay import padded_size, recordings
+from mitsuba_mrt.renderer.replay import padded_size, recordings, replaying
 from mitsuba_mrt.renderer.lanes import is_jit
 from mitsuba_mrt.renderer.trace import trace_pixels
 from helpers import small_scene_xml
@@ -259,3 +259,18 @@ def test_a_trace_without_its_variance_has_the_same_values():
     for a, b in zip(_fields(with_it), _fields(without)):
         if b is not None:
             np.testing.assert_array_equal(a, b)
+
+
+def test_a_full_render_denoised_records_the_passes_1_spp_launch():
+    # auto plans that launch as replayed (no recording, no compilation) once it has run
+    from mitsuba_mrt.renderer.api import GridTracer, render_denoised
+
+    scene = mi.load_string(PATH_SCENE)
+    sensor = scene.sensors()[0]
+    tracer = GridTracer(scene, sensor, scene.integrator(), 4, 0)
+    assert not tracer.pass_recorded(1)
+    render_denoised(scene, spp=1)
+    assert tracer.pass_recorded(1)
+    assert not tracer.pass_recorded(2) and not tracer.pass_recorded(1, halves=True)
+    with replaying(False):
+        assert not tracer.pass_recorded(1)
