@@ -25,7 +25,7 @@ from ..modes.plan import Plan
 from ..recon.compose import region_values
 from ..recon.denoise import denoise_image, oidn_available
 from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
-from ..runtime.jit import counting_kernels
+from ..runtime.jit import counting_kernels, recording_flags
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
                      TracedCounts, check_radiance)
 from . import auto, kept_plans
@@ -181,7 +181,7 @@ def render(scene: mi.Scene, integrator: mi.Integrator | None = None, *, sensor=0
         Fields of :class:`MRTParams` (``sample_fraction=0.05``,
         ``time_limit=2.0`` ...).
     """
-    with counting_kernels() as counts:
+    with counting_kernels() as counts, recording_flags():
         result = _render(scene, integrator, sensor, spp, seed, params, mode, progress,
                          param_overrides)
     result.timings.compile = KernelCounts(*counts)
@@ -342,8 +342,9 @@ def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
     tracer = GridTracer(scene, sensor, unwrap(scene, integrator).nested, spp, seed)
     width, height = (int(v) for v in sensor.film().crop_size())
     xy = every_pixel(width, height)
-    trace = tracer(xy, stream=SeedStream.GRID, aovs=True, ids=False, replay=True, box=True,
-                   variance=False)
+    with recording_flags():  # (as a render's passes: theirs replay its recording)
+        trace = tracer(xy, stream=SeedStream.GRID, aovs=True, ids=False, replay=True,
+                       box=True, variance=False)
     check_radiance(trace.radiance, "pixels")
     image = denoise_image(*(v.reshape(height, width, 3)
                             for v in (trace.radiance, trace.albedo, trace.normal)),

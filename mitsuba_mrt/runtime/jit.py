@@ -8,7 +8,7 @@ Dr.Jit's thread pool is left as the host set it: its idle workers do not
 slow the reconstruction's numpy code measurably (docs/BENCHMARKS.md), and
 resizing the pool around every reconstruction once hung a process.
 :func:`counting_kernels` and :func:`kernel_seconds` watch what Dr.Jit compiles
-and runs.
+and runs; a render traces under :func:`recording_flags`.
 """
 
 from __future__ import annotations
@@ -110,3 +110,31 @@ def kernel_seconds():
                             for entry in history if not entry.get("cache_hit")) / 1e3
         spent.execute = sum(entry.get("execution_time", 0.0) for entry in history) / 1e3
         dr.set_flag(dr.JitFlag.KernelHistory, before)
+
+
+@contextlib.contextmanager
+def recording_flags():
+    """Dr.Jit's kernel history on within the block, as :func:`kernel_seconds`
+    switches it on (what the block gathered is dropped after, and the flag
+    set back): a frozen function's recording holds for the JIT flags it was
+    made under, and a call under others records it again (a fresh process's
+    first trace of a scene: about 0.1 s), so every trace of a render is
+    recorded under the one set of flags, timed or not.
+
+    Examples
+    --------
+    >>> import drjit as dr
+    >>> with recording_flags():
+    ...     dr.flag(dr.JitFlag.KernelHistory)
+    True
+    """
+    import drjit as dr
+
+    before = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        yield
+    finally:
+        if not before:
+            dr.kernel_history()  # (reading the history clears it)
+            dr.set_flag(dr.JitFlag.KernelHistory, False)

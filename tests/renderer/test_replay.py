@@ -274,3 +274,23 @@ def test_a_full_render_denoised_records_the_passes_1_spp_launch():
     assert not tracer.pass_recorded(2) and not tracer.pass_recorded(1, halves=True)
     with replaying(False):
         assert not tracer.pass_recorded(1)
+
+
+def test_a_render_s_traces_replay_recordings_made_under_its_flags():
+    # Dr.Jit records a frozen function again under other JIT flags (kernel
+    # history on, as the passes' timed launches have it): a full render
+    # denoised records under a render's flags, so a render's pass replays it
+    import drjit as dr
+
+    from mitsuba_mrt.renderer.api import GridTracer, render_denoised
+    from mitsuba_mrt.runtime.jit import kernel_seconds, recording_flags
+
+    scene = mi.load_string(PATH_SCENE)
+    tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), 1, 0)
+    xy = np.stack(np.meshgrid(np.arange(24), np.arange(24)), -1).reshape(-1, 2)
+    render_denoised(scene, spp=1)
+    before = recordings()
+    with recording_flags(), kernel_seconds():
+        tracer(xy, stream=7, aovs=True, ids=False, box=True, replay=True, variance=False)
+    assert recordings() == before
+    assert not dr.flag(dr.JitFlag.KernelHistory)  # (as it was)
