@@ -331,9 +331,13 @@ def textured_pixels(shape_index: np.ndarray, albedo: np.ndarray,
     """
     shape_index = np.asarray(shape_index)
     out = np.zeros(len(shape_index), dtype=bool)
-    level = np.asarray(albedo, dtype=np.float64).mean(axis=-1)
-    for index in np.unique(shape_index[shape_index > 0]):
-        if index >= len(diffuse) or not diffuse[index]:
+    albedo = np.asarray(albedo, dtype=np.float64)
+    # (the channels' mean, added in the order mean(axis=-1) adds them: the
+    # same values, without its reduction over a strided axis)
+    level = (albedo[:, 0] + albedo[:, 1] + albedo[:, 2]) / 3.0
+    seen = np.flatnonzero(np.bincount(shape_index.ravel(), minlength=1)[1:]) + 1
+    for index in seen[seen < len(diffuse)]:
+        if not diffuse[index]:
             continue
         mine = shape_index == index
         lit = level[mine & (level > 0)]
