@@ -134,6 +134,14 @@ PREVIEW_SLACK = 1.1
 #: itself.
 PROBED_SLACK = 1.0
 
+#: Under a time limit, what denoising textured diffuse surfaces as their
+#: shading (:attr:`.progressive.Passes.shading`) adds to a pass's last OIDN
+#: call, as a share of its expected time: finding the textured pixels and
+#: the division (on the gallery's textured scenes at 256 px, 2 cores, the
+#: shading call took 1.17 times a plain one, and finding the pixels 0.1-0.35
+#: times more, the most right after OIDN's or Dr.Jit's threads have run).
+SHADING_EXTRA = 0.5
+
 #: The plan, under the default target, where every surface is diffuse and
 #: every light a point, spot or directional one
 #: (:func:`~.scene_query.lit_diffuse_by_points`, the report's own scenes):
@@ -233,6 +241,11 @@ WITHIN_REASON = "{}; within the time limit"
 #: preview is dropped: a preview traces no round, so one slow round would
 #: otherwise give previews for good.
 _first_round_s: dict = {}
+#: The seconds the last OIDN call of a time-limited render's passes took,
+#: per the same keys and whether it denoised textures as their shading,
+#: from the last such render: the next one leaves at least this for it after
+#: a first round (OIDN's expected time leaves out a filter made anew).
+_final_denoise_s: dict = {}
 #: The passes' launches (:class:`~.progressive.LaunchCost`), per traced
 #: objects and pixel count, of the last :data:`KEPT_COSTS` such keys: what
 #: the next render's passes plan from.
@@ -422,6 +435,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         denoise=denoise, stop_early=stop_early if escape else None, on_round=on_round,
         surfaces=surfaces, cost=_kept_cost(key, tracer))
     if image is not None:
+        if deadline is not None and denoise:
+            _keep(_final_denoise_s, (key, progress.shading), progress.denoise_s)
         name, kind = ("full+oidn", "denoised") if denoise else ("passes", "passes")
         choice = Candidate(name, kind, progress.spp, denoise=denoise,
                            seconds=progress.trace_s + progress.denoise_s,
@@ -557,7 +572,10 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     the whole image would end after :data:`PREVIEW_SLACK` times the limit
     (:data:`PROBED_SLACK` times, where a probe tells the pass's time),
     else None; the passes' textured surfaces (:func:`_surfaces`) and whether
-    they were looked up, which took time the question then counts).
+    they were looked up, which took time the question then counts).  Where
+    denoising the textured surfaces as their shading would end past the
+    limit itself (:data:`SHADING_EXTRA`) but plain OIDN would not, the
+    passes go without them (None, looked up).
     ``probed``: the grid probe, where :func:`_mrt_within` has made it;
     ``traced``: what it traced of every pixel."""
     width, height, limit = pattern.width, pattern.height, params.time_limit
@@ -567,12 +585,16 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     if first_s is None and launches is not None and launches.replayed:
         # earlier passes measured a pass (a probe can record its kernels anew)
         first_s = time.perf_counter() - started + launches(launches.cheapest())
+    textured = bool(textured_diffuse_shapes(scene).any())
     if first_s is not None:
-        due = _preview_due(started + PREVIEW_SLACK * limit, started + first_s, width * height,
-                           params.denoise_quality)
-        if due:  # (the next render asks the launches' line or a probe)
+        def late(shading: bool) -> bool:  # (the shading, which may go, within the limit)
+            slack = PROBED_SLACK if shading else PREVIEW_SLACK
+            return _preview_due(started + slack * limit, started + first_s,
+                                width * height, params.denoise_quality, shading, key)
+        if late(False):  # (the next render asks the launches' line or a probe)
             _first_round_s.pop(key, None)
-        return (AutoOutcome(preview) if due else None), None, False
+            return AutoOutcome(preview), None, False
+        return None, None, textured and late(True)  # (then denoised plainly)
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
     end = started + PROBED_SLACK * limit
     grid, pass_s = probed.grid, probed.pass_s
@@ -585,15 +607,19 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
         pass_s = min(probed.host + spp * (probed.pass_s - probed.host), launches(spp))
     pass_s += _passes_recording_s(key, probed)
 
-    def due() -> bool:
+    def due(shading: bool) -> bool:
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
-                            params.denoise_quality)
-    if due():
+                            params.denoise_quality, shading, key)
+    if due(False):
         return AutoOutcome(preview, grid=grid), None, False
-    # the passes' textured pixels, then the same question with their time spent
-    surfaces = _surfaces(scene, tracer, width, height,
-                         None if traced is None else traced.shape_index())
-    return (AutoOutcome(preview, grid=grid) if due() else None), surfaces, True
+    if textured and not due(True):
+        # the passes' textured pixels, then the same question with their time spent
+        surfaces = _surfaces(scene, tracer, width, height,
+                             None if traced is None else traced.shape_index())
+        if not due(surfaces is not None):
+            return None, surfaces, True
+    # the passes, denoised plainly: the shading's extra time would end past the limit
+    return (AutoOutcome(preview, grid=grid) if due(False) else None), None, True
 
 
 def _note_baked(launches: LaunchCost | None, notes: list) -> None:
@@ -847,11 +873,17 @@ def _mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     return AutoOutcome(plan, id_pass=traced.id_pass), traced, probed
 
 
-def _preview_due(end: float, first_end: float, pixels: int, quality: str) -> bool:
+def _preview_due(end: float, first_end: float, pixels: int, quality: str,
+                 shading: bool = False, key: tuple | None = None) -> bool:
     """Whether OIDN on ``pixels`` after a first round ending at
     ``first_end`` would end after ``end`` (both ``time.perf_counter()``
-    values)."""
-    return first_end + expected_seconds(pixels, preset(quality)) > end
+    values); with ``shading``, textured surfaces denoised as their shading
+    (:data:`SHADING_EXTRA`); at least what the last such call for ``key``
+    took (:data:`_final_denoise_s`)."""
+    oidn = expected_seconds(pixels, preset(quality)) * (1.0 + (SHADING_EXTRA if shading
+                                                               else 0.0))
+    oidn = max(oidn, _final_denoise_s.get((key, shading), 0.0))
+    return first_end + oidn > end
 
 
 def noise_free(tracer, width: int, height: int) -> bool:

@@ -5,8 +5,9 @@ made: the trace's recorded kernels and the Mitsuba objects held for them,
 a filter or integrator made once per variant, the tables of the pixel
 filters, the OIDN device and filters, interpolation weights, and what the
 last renders took (OIDN's calls, ``auto``'s first round under a time
-limit, the passes' launches, the grid probe's recording, a preview's
-stages after its grid, the checked MRT plans).  None of them
+limit and its passes' last OIDN call, the passes' launches, the grid
+probe's recording, a preview's stages after its grid, the checked MRT
+plans).  None of them
 changes a result, except that ``auto`` plans a time limit from those
 times.  :func:`clear_caches` drops them all, to free what they hold or to
 time a first call again; docs/ARCHITECTURE.md (Process-wide state) lists
@@ -27,6 +28,7 @@ def clear_caches() -> None:
     """
     replay.clear_recordings()
     auto._first_round_s.clear()
+    auto._final_denoise_s.clear()
     auto._launch_costs.clear()
     auto._probe_recording_s.clear()
     auto._probe_execute.clear()

@@ -560,6 +560,34 @@ def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monke
     assert again.auto.choice.kind == "denoised"
 
 
+def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monkeypatch):
+    # denoising textured surfaces as their shading adds SHADING_EXTRA to OIDN's
+    # expected time: where that alone would end past the limit, the passes
+    # denoise plainly (no surfaces looked up) rather than take the preview
+    monkeypatch.setattr(auto, "expected_seconds", lambda pixels, quality: 0.1)
+    monkeypatch.setattr(auto, "_launch_costs", {})
+    monkeypatch.setattr(auto, "textured_diffuse_shapes", lambda scene: np.array([False, True]))
+    assert not auto._preview_due(1.0, 0.88, 100, "fast")
+    assert auto._preview_due(1.0, 0.88, 100, "fast", shading=True)
+    key = ("scene", 100)
+    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
+                             pass_recorded=lambda spp: False)
+    pattern = SimpleNamespace(width=10, height=10)
+    params = MRTParams(time_limit=1.0)
+    started = __import__("time").perf_counter()
+    outcomes = {}
+    for first_s in (0.5, 0.95, 1.05):  # the last first round ended this long after the start
+        monkeypatch.setattr(auto, "_first_round_s", {key: first_s})
+        outcome, surfaces, found = auto._preview_first(None, pattern, tracer, params, started,
+                                                       key, [])
+        outcomes[first_s] = (outcome is not None, surfaces, found)
+    # (plain OIDN against PREVIEW_SLACK times the limit, 1.1 s; the shading,
+    # which may go, against the limit itself)
+    assert outcomes[0.5] == (False, None, False)  # shading fits: the passes look the surfaces up
+    assert outcomes[0.95] == (False, None, True)  # plain OIDN alone fits
+    assert outcomes[1.05][0]  # nothing fits: the preview
+
+
 def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_launched(
         monkeypatch):
     monkeypatch.setattr(auto, "_launch_costs", {})
@@ -584,7 +612,8 @@ def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_laun
     other = ("scene 2",) + key[1:]
     assert auto._passes_recording_s(other, probe(True, 0.030)) == 0.0
     assert auto._passes_recording_s(other, probe(False, 0.004)) == pytest.approx(0.026)
-    auto._kept_cost(other, SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp: spp == 1))
+    recorded = SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp: spp == 1)
+    auto._kept_cost(other, recorded)
     assert auto._passes_recording_s(other, probe(False, 0.004)) == 0.0
 
 
