@@ -651,6 +651,28 @@ class LaunchCost:
         return min((spp for spp in sizes if not self._unplanned(spp)),
                    key=lambda spp: (self(spp), spp))
 
+    def first(self, seconds: float) -> int:
+        """The spp of a time-limited render's first launch, to end within
+        ``seconds``: the most that :meth:`fits` ``seconds`` over
+        :data:`ROUND_SAFETY`, else the cheapest; where a new spp compiles,
+        an spp launched before that fits ``seconds`` itself where it is more
+        (a stratifying sampler's one launch of more spp beats several of
+        fewer, each a stratum of its own; the rest of the time is filled
+        after it).
+
+        Examples
+        --------
+        >>> cost = LaunchCost([(9, 0.25, False)], spp_compiles=True, replays=frozenset([1]))
+        >>> cost.first(0.1), cost.first(0.27), cost.first(0.4)
+        (1, 9, 9)
+        """
+        fits = self.fits(seconds / ROUND_SAFETY)
+        if self.spp_compiles:
+            fixed, per_spp = self._line()
+            fits = max([fits] + [launch.spp for launch in self.launches
+                                 if fixed + per_spp * launch.spp <= seconds])
+        return fits or self.cheapest()
+
     def fits(self, seconds: float) -> int:
         """The most spp a launch expected to take at most ``seconds`` may
         have (only those launched before or in :attr:`replays` where a new
@@ -786,8 +808,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         round_size = max_spp
     elif not estimates:
         oidn_s = expected_seconds(n, quality) if denoise else 0.0
-        fits = cost.fits((deadline - time.perf_counter() - oidn_s) / ROUND_SAFETY)
-        round_size = min(fits or cost.cheapest(), max_spp)
+        round_size = min(cost.first(deadline - time.perf_counter() - oidn_s), max_spp)
         round_size = round_size if exact is None else exact(round_size)
     passes.guide_spp = max_spp if deadline is not None and bakes else max(GUIDE_PASSES,
                                                                           round_size)
