@@ -582,7 +582,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
     launches = _kept_cost(key, tracer)
-    if first_s is None and launches is not None and launches.replayed:
+    if first_s is None and launches.replayed:
         # earlier passes measured a pass (a probe can record its kernels anew)
         first_s = time.perf_counter() - started + launches(launches.cheapest())
     textured = bool(textured_diffuse_shapes(scene).any())
@@ -598,7 +598,7 @@ def _preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, sta
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
     end = started + PROBED_SLACK * limit
     grid, pass_s = probed.grid, probed.pass_s
-    if launches is not None and launches.spp_compiles and launches.launches:
+    if launches.spp_compiles and launches.launches:
         # a sampler that bakes its spp launches only spp launched before: the
         # probe's sample scaled to the least of them (which counts the kernels'
         # fixed part spp times), or the launches' line where it says less (a
