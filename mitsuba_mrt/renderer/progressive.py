@@ -217,6 +217,17 @@ class Passes:
         """(albedo, normal): the means of the samples that traced them."""
         return self.albedo[index] / self.guides, self.normal[index] / self.guides
 
+    def find_textured(self, surfaces: tuple, max_spp: int) -> None:
+        """After the first round that traced the guides, mark the pixels on
+        textured diffuse surfaces (``surfaces``: see :func:`run_passes`) in
+        :attr:`textured`; where there are some, every later pass traces the
+        guides too (up to ``max_spp``), as the division wants every sample's albedo."""
+        if self.textured is not None or self.count != self.guides:
+            return
+        self.textured = textured_pixels(surfaces[0], self.guide()[0], surfaces[1])
+        if self.shading:
+            self.guide_spp = max_spp
+
     @property
     def shading(self) -> bool:
         """Whether some pixels lie on textured diffuse surfaces (``textured``):
@@ -776,22 +787,17 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     rows = estimate_rows(height, width)
     crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
     passes, progress, launch = Passes(crop), Progress(), 0
-    round_size, pass_s, oidn_s = FIRST_ROUND, 0.0, 0.0
-    if target_error is None and deadline is None:  # the default target
-        round_size = min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)),
-                         max_spp)
     # a round is one launch, its halves its odd and even samples: a single
     # launch keeps a stratifying sampler's strata whole (two launches of half
     # the spp gave 1.3-1.6x the error of one on such scenes)
     bakes = sampler_bakes_spp(tracer.sensor.sampler())
     cost = LaunchCost(spp_compiles=bakes) if cost is None else cost
     # A time limit alone needs no estimates: the passes fill the time, in one
-    # half, and leave the last OIDN call its expected time; the first launch
-    # is as large as earlier renders' launches say fits, else the cheapest.
-    # Under a deadline a sampler that compiles kernels per spp keeps the
-    # default rounds' layout (all of a launch in one half, as beside their
-    # companion; the guides throughout), so that the spp launched before
-    # replay their kernels (a new spp's compilation is its LaunchCost.record_s)
+    # half, and leave the last OIDN call its expected time.  Under a deadline
+    # a sampler that compiles kernels per spp keeps the default rounds'
+    # layout (all of a launch in one half, as beside their companion; the
+    # guides throughout), so that the spp launched before replay their
+    # kernels (a new spp's compilation is its LaunchCost.record_s)
     final, quality = quality, preset(quality)  # (the estimates' preset)
     estimates = not fixed and not (deadline is not None and target_error is None)
     passes.estimated = estimates
@@ -804,23 +810,16 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     # (under a deadline a launch traces no more spp than planned)
     exact = (None if deadline is None or not bakes else
              lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))
-    if fixed:
-        round_size = max_spp
-    elif not estimates:
-        oidn_s = expected_seconds(n, quality) if denoise else 0.0
-        round_size = min(cost.first(deadline - time.perf_counter() - oidn_s), max_spp)
-        round_size = round_size if exact is None else exact(round_size)
+    round_size, oidn_s = _first_round(fixed, estimates, deadline, target_error, cost, exact,
+                                      max_spp, full_spp, n, quality if denoise else None)
     passes.guide_spp = max_spp if deadline is not None and bakes else max(GUIDE_PASSES,
                                                                           round_size)
     while True:
         begin = time.perf_counter()
         # (a round's two halves serve the estimates alone)
         launch = _trace_round(passes, tracer, xy, round_size, launch, estimates, cost)
-        if surfaces is not None and denoise and passes.textured is None \
-                and passes.count == passes.guides:  # the first round: the textured pixels
-            passes.textured = textured_pixels(surfaces[0], passes.guide()[0], surfaces[1])
-            if passes.shading:  # the division wants every sample's albedo
-                passes.guide_spp = max_spp
+        if surfaces is not None and denoise:
+            passes.find_textured(surfaces, max_spp)
         spent = time.perf_counter() - begin
         progress.trace_s += spent
         pass_s = spent / round_size
@@ -873,18 +872,48 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             round_size = to_target(progress.history, target, passes.count, next_size)
     image = passes.mean
     if denoise:
-        progress.shading = passes.shading and passes.guides == passes.count
-        left = None if deadline is None else deadline - time.perf_counter() - oidn_s
-        progress.quality = _final_preset(final, progress, progress.trace_s, oidn_s, left, n)
-        begin = time.perf_counter()
-        # under a time limit the texture is cleaned in what the passes left of
-        # it, not at the cost of an spp (1 spp had 12-35 % more error than 2)
-        progress.clean_texture = (
-            progress.shading and passes.count <= CLEAN_TEXTURE_SPP
-            and (deadline is None or deadline - begin
-                 >= _oidn_s(progress.quality, oidn_s, n) + texture_seconds(n)))
-        image = passes.denoised(image, slice(None), (height, width, 3), progress.quality,
-                                progress.shading, progress.clean_texture)
-        progress.denoise_s = time.perf_counter() - begin
+        image = _final_denoise(passes, progress, final, deadline, oidn_s, (height, width, 3))
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)
+
+
+def _first_round(fixed: bool, estimates: bool, deadline: float | None,
+                 target_error: float | None, cost: LaunchCost, exact, max_spp: int,
+                 full_spp: int, pixels: int, quality: str | None) -> tuple[int, float]:
+    """(the first round's passes, the last OIDN call's expected seconds so
+    far) for :func:`run_passes`: a measured plan's ``max_spp`` at once; under
+    a time limit alone a launch as large as earlier renders' launches say
+    fits beside OIDN at ``quality`` (None: no OIDN), else the cheapest; for
+    the default target :data:`DEFAULT_FIRST_SHARE` of a full render's spp;
+    else :data:`FIRST_ROUND`."""
+    if fixed:
+        return max_spp, 0.0
+    if not estimates:
+        oidn_s = 0.0 if quality is None else expected_seconds(pixels, quality)
+        size = min(cost.first(deadline - time.perf_counter() - oidn_s), max_spp)
+        return (size if exact is None else exact(size)), oidn_s
+    if target_error is None and deadline is None:
+        return min(max(FIRST_ROUND, 2 * round(full_spp * DEFAULT_FIRST_SHARE / 2)), max_spp), 0.0
+    return FIRST_ROUND, 0.0
+
+
+def _final_denoise(passes: Passes, progress: Progress, final: str, deadline: float | None,
+                   oidn_s: float, shape: tuple) -> np.ndarray:
+    """The passes' mean through the last OIDN call, at ``final``'s preset
+    (:func:`_final_preset`), textured surfaces as their shading where every
+    pass traced the guides; what it chose and took go into ``progress``."""
+    n = shape[0] * shape[1]
+    progress.shading = passes.shading and passes.guides == passes.count
+    left = None if deadline is None else deadline - time.perf_counter() - oidn_s
+    progress.quality = _final_preset(final, progress, progress.trace_s, oidn_s, left, n)
+    begin = time.perf_counter()
+    # under a time limit the texture is cleaned in what the passes left of
+    # it, not at the cost of an spp (1 spp had 12-35 % more error than 2)
+    progress.clean_texture = (
+        progress.shading and passes.count <= CLEAN_TEXTURE_SPP
+        and (deadline is None or deadline - begin
+             >= _oidn_s(progress.quality, oidn_s, n) + texture_seconds(n)))
+    image = passes.denoised(passes.mean, slice(None), shape, progress.quality,
+                            progress.shading, progress.clean_texture)
+    progress.denoise_s = time.perf_counter() - begin
+    return image
