@@ -73,7 +73,7 @@ from . import kept_plans
 from .held_out import HeldOut
 from .pilot import effective_area, run_pilot
 from .preview import preview_grid
-from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, run_passes
+from .progressive import FIRST_ROUND, LaunchCost, Progress, needed_spp, predict, run_passes
 from .replay import recordings, token
 from .scene_query import (environment_map, has_mirrors, lit_diffuse_by_points,
                           sampler_bakes_spp, surely_noisy, textured_diffuse_shapes,
@@ -415,9 +415,12 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
             # a full render's cost, near enough; or too few rounds to tell
             return None
         needed = needed_spp(progress.history, target)  # the spp of the final image
-        costs.update(passes=max(needed - progress.spp, 0.0) * pass_s,
+        # (the passes stop at the scene's spp: past it, their candidate is what they reach there)
+        reached = min(needed, spp)
+        costs.update(passes=max(reached - progress.spp, 0.0) * pass_s,
                      full=spp * pass_s / PASS_SAMPLES, mrt=params.sample_fraction * spp * pass_s,
-                     passes_spp=needed, target=target, full_error=progress.full_error)
+                     passes_spp=reached, target=target, full_error=progress.full_error,
+                     passes_error=target if needed <= spp else predict(progress.history, spp))
         if costs["passes"] <= costs["full"]:
             return None
         return "more passes would cost more than a full render"
@@ -914,9 +917,8 @@ def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress
     begin = time.perf_counter()
     candidates = [Candidate("full", "full", tracer.spp, seconds=costs["full"],
                             error=costs["full_error"]),
-                  Candidate("full+oidn", "denoised",
-                            int(min(costs["passes_spp"], tracer.spp)),
-                            denoise=True, seconds=costs["passes"], error=costs["target"])]
+                  Candidate("full+oidn", "denoised", math.ceil(costs["passes_spp"]),
+                            denoise=True, seconds=costs["passes"], error=costs["passes_error"])]
     pixels = 0
     if costs["target"] > 0 and costs["mrt"] < min(costs["full"], costs["passes"]):
         pilot = run_pilot(scene, pattern, tracer, params, costs["target"],

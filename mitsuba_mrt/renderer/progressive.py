@@ -850,7 +850,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
                 progress.stopped = reason
                 return None, None, progress
         if at_cap:
-            progress.stopped = f"reached {passes.count} spp"
+            short = None not in (target, progress.predicted) and progress.predicted > target
+            progress.stopped = f"reached {passes.count} spp" + (", short of the target"
+                                                                 if short else "")
             break
         # without estimates nothing is learnt from rounds: once a launch was
         # replayed (here or by an earlier render: the first, if it recorded,

@@ -35,7 +35,7 @@ def test_by_default_the_passes_stop_at_half_the_scenes_spp(variant, monkeypatch)
     scene = mi.load_string(scene_xml(256, spp=64))
     result = mitsuba_mrt.render(scene)
     assert result.mode_used == "full+oidn" and result.spp == 32
-    assert result.auto.reason == "denoised passes: reached 32 spp"
+    assert result.auto.reason == "denoised passes: reached 32 spp, short of the target"
     # rounds of 8, 8 and 16 spp; the last, which ends them at the cap, is not
     # estimated (its estimate would change no decision), only predicted
     assert [spp for spp, _ in result.auto.passes] == [4, 8]
@@ -1310,3 +1310,14 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
     # an independent sampler plans a pass of any spp: no such note
     plain = mitsuba_mrt.render(mi.load_string(scene_xml(64, spp=16)), time_limit=1e-6)
     assert not any("bakes" in note for note in plain.auto.notes)
+
+
+def test_a_noise_threshold_beyond_the_scenes_spp_is_met_by_no_candidate(variant):
+    # the passes' candidate is what they reach at the scene's spp, not the target
+    plan = mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64)), noise_threshold=1e-6).auto
+    passes = next(c for c in plan.candidates if c.name == "full+oidn")
+    assert passes.spp <= 64 and passes.error > 1e-6
+    assert "none meets the target" in plan.reason
+    # where the passes reach the scene's spp first, they say they fell short
+    few = mitsuba_mrt.render(mi.load_string(scene_xml(512)), noise_threshold=1e-6).auto
+    assert few.reason == "denoised passes: reached 8 spp, short of the target"
