@@ -236,11 +236,6 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, choice.spp, seed)
             return _whole_image_result(image, alpha, params, choice.spp, plan,
                                        Timings(check=plan.pilot_s, full_render=seconds), start)
-        if choice.kind == "denoised":  # the passes again, now without a way out
-            outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
-                                    on_round=progress)
-            outcome.plan.reason, outcome.plan.candidates = plan.reason, plan.candidates
-            return _passes_result(outcome, tracer, params, start)
         if choice.fraction is not None:  # (the plan chose its grid)
             pattern = grid_pattern(width, height, choice.fraction)
         if check:  # an MRT image chosen without a pilot: kept if its check says so

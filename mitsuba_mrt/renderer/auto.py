@@ -46,7 +46,9 @@ the check or the estimates that chose it: :func:`_again`):
    a ``noise_threshold`` in passes costs more than a full render, a pilot
    (:mod:`.pilot`) measures the MRT's modes on strips of the image and the
    planner (:func:`mitsuba_mrt.modes.plan.choose`) picks the cheapest
-   candidate that meets it.
+   candidate that meets it, else the most accurate (the passes' candidate:
+   what they reach within the scene's spp); passes it picks go on from
+   where they stopped.
 
 :func:`plan_without_pilot` is the plan where nothing is worth measuring
 (the scalar variant, small jobs): the full render.
@@ -94,6 +96,8 @@ PASS_SAMPLES = 2.0
 #: Rounds of passes before their estimates may end them (a noise-free scene's
 #: target of 0 ends them after the first).
 CHECK_AFTER_ROUNDS = 3
+#: Why passes under a noise threshold stopped to let the planner weigh them.
+STOPPED_REASON = "more passes would cost more than a full render"
 #: Under a time limit the passes may take up to this many times the scene's spp.
 LIMIT_SPP_FACTOR = 4
 #: Under the default target they stop at this share of it: the round that
@@ -394,10 +398,13 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     if denoise and not found:
         surfaces = _surfaces(scene, tracer, width, height, traced.shape_index())
     recorded = recordings()
-    costs = {}
+    costs, measured = {}, []
 
     def stop_early(progress: Progress, pass_s: float):
-        """Whether passes are the wrong plan for the target: the reason, or None."""
+        """Whether passes are the wrong plan for the target: the reason, or
+        None.  Where more passes would cost more than a full render, the
+        planner weighs them against the others (:func:`_measured_plan`);
+        where it chooses them, they go on from here, without a way out."""
         if deadline is not None:
             # the first round, once traced, is denoised however late it ends: OIDN on
             # it costs less than a preview would (its time tells the next render's plan)
@@ -409,8 +416,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         if not denoise:
             return None
         target = params.noise_threshold or progress.full_error
-        if target > 0 and (params.noise_threshold is None
-                           or len(progress.history) < CHECK_AFTER_ROUNDS):
+        if measured or (target > 0 and (params.noise_threshold is None
+                                        or len(progress.history) < CHECK_AFTER_ROUNDS)):
             # the full render's own noise: passes to the scene's spp meet it at
             # a full render's cost, near enough; or too few rounds to tell
             return None
@@ -423,7 +430,11 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                      passes_error=target if needed <= spp else predict(progress.history, spp))
         if costs["passes"] <= costs["full"]:
             return None
-        return "more passes would cost more than a full render"
+        begin = time.perf_counter()
+        measured.append(_measured_plan(scene, pattern, tracer, params, progress, costs, notes,
+                                       STOPPED_REASON))
+        progress.estimate_s += time.perf_counter() - begin  # (the passes' check, if they go on)
+        return None if measured[0].choice.kind == "denoised" else STOPPED_REASON
 
     if limit is not None:
         max_spp = spp * LIMIT_SPP_FACTOR
@@ -452,8 +463,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
                     passes=list(progress.history))
         if default and denoise:  # (the next default render of the scene takes them again)
             kept_plans.note_passes(kept_key, choice, plan.reason)
+        if measured:  # (the planner chose the passes, which went on)
+            plan.reason, plan.candidates = measured[0].reason, measured[0].candidates
         return AutoOutcome(plan, image, alpha, progress, id_pass=traced.id_pass)
-    return AutoOutcome(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
+    return AutoOutcome(measured[0])
 
 
 def _again(scene, tracer, key: tuple, kept_key: tuple, width: int, height: int,
@@ -911,9 +924,10 @@ def noise_free(tracer, width: int, height: int) -> bool:
 
 
 def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress, costs: dict,
-                   notes: list) -> Plan:
+                   notes: list, stopped: str) -> Plan:
     """The planner's choice among a full render, more passes and the MRT's modes
-    (measured by the pilot where its grid is cheaper than both others)."""
+    (measured by the pilot where its grid is cheaper than both others), the
+    passes having ``stopped`` (why) to weigh them."""
     begin = time.perf_counter()
     candidates = [Candidate("full", "full", tracer.spp, seconds=costs["full"],
                             error=costs["full_error"]),
@@ -927,7 +941,7 @@ def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress
         notes += pilot.notes
         pixels = pilot.pixels
     plan = choose(candidates, target_error=costs["target"])
-    plan.reason = f"{progress.stopped}; {plan.reason}"
+    plan.reason = f"{stopped}; {plan.reason}"
     plan.pilot_s = progress.trace_s + progress.estimate_s + time.perf_counter() - begin
     plan.pilot_pixels, plan.notes, plan.passes = pixels, notes, list(progress.history)
     return plan

@@ -1321,3 +1321,23 @@ def test_a_noise_threshold_beyond_the_scenes_spp_is_met_by_no_candidate(variant)
     # where the passes reach the scene's spp first, they say they fell short
     few = mitsuba_mrt.render(mi.load_string(scene_xml(512)), noise_threshold=1e-6).auto
     assert few.reason == "denoised passes: reached 8 spp, short of the target"
+
+
+def test_passes_the_planner_weighs_and_chooses_go_on_untraced_again(variant, monkeypatch):
+    from mitsuba_mrt.modes import plan as planner
+    from mitsuba_mrt.renderer import progressive
+
+    def passes_first(candidates, **kwargs):
+        chosen = planner.choose(candidates, **kwargs)
+        chosen.choice = next(c for c in candidates if c.kind == "denoised")
+        return chosen
+    monkeypatch.setattr(auto, "choose", passes_first)
+    launched = []
+    launch = progressive._launch
+    monkeypatch.setattr(progressive, "_launch", lambda passes, tracer, xy, spp, *rest: (
+        launched.append(spp), launch(passes, tracer, xy, spp, *rest))[1])
+    result = mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64)), noise_threshold=1e-6)
+    plan = result.auto
+    assert result.mode_used == "full+oidn" and len(plan.candidates) > 2
+    assert plan.reason.startswith("more passes would cost more than a full render")
+    assert sum(launched) == result.spp  # each pass traced once
