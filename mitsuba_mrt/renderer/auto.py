@@ -331,9 +331,11 @@ def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
     The scalar variant traces pixel by pixel in Python while ``mi.render``
     runs Mitsuba's multithreaded C++ loop, so only a full render can win
     there; below ``AUTO_MIN_SAMPLES`` samples the passes' launches would cost
-    more than they could save, unless a time limit asks for what fits it.
+    more than they could save, unless a time limit asks for what fits it or
+    a noise threshold for an estimated error.
     """
-    if jit and (width * height * spp >= AUTO_MIN_SAMPLES or params.time_limit is not None):
+    if jit and (width * height * spp >= AUTO_MIN_SAMPLES or params.time_limit is not None
+                or params.noise_threshold is not None):
         return None
     reason = ("the scalar variant renders in full" if not jit
               else "too few samples for a plan to pay")
@@ -926,15 +928,18 @@ def noise_free(tracer, width: int, height: int) -> bool:
 def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress, costs: dict,
                    notes: list, stopped: str) -> Plan:
     """The planner's choice among a full render, more passes and the MRT's modes
-    (measured by the pilot where its grid is cheaper than both others), the
-    passes having ``stopped`` (why) to weigh them."""
+    (measured by the pilot where its grid is cheaper than both others and
+    the job is not small: :data:`AUTO_MIN_SAMPLES`), the passes having
+    ``stopped`` (why) to weigh them."""
     begin = time.perf_counter()
     candidates = [Candidate("full", "full", tracer.spp, seconds=costs["full"],
                             error=costs["full_error"]),
                   Candidate("full+oidn", "denoised", math.ceil(costs["passes_spp"]),
                             denoise=True, seconds=costs["passes"], error=costs["passes_error"])]
     pixels = 0
-    if costs["target"] > 0 and costs["mrt"] < min(costs["full"], costs["passes"]):
+    samples = pattern.width * pattern.height * tracer.spp  # (a small job's pilot would not pay)
+    if (costs["target"] > 0 and costs["mrt"] < min(costs["full"], costs["passes"])
+            and samples >= AUTO_MIN_SAMPLES):
         pilot = run_pilot(scene, pattern, tracer, params, costs["target"],
                           min(costs["full"], costs["passes"]), denoised=False)
         candidates += [c for c in pilot.candidates if c.kind == "mrt"]

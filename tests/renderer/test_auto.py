@@ -789,6 +789,16 @@ def test_small_jobs_under_a_time_limit_take_what_fits_it(variant):
     assert result.spp == 1 and result.auto.time_limit == 1e-6
 
 
+def test_small_jobs_under_a_noise_threshold_estimate_it(variant):
+    scene = mi.load_string(scene_xml(32))
+    loose = mitsuba_mrt.render(scene, noise_threshold=0.5).auto
+    assert "too few samples" not in loose.reason and loose.choice.error <= 0.5
+    # one no candidate meets: said so, without the MRT's pilot (a small job's would not pay)
+    tight = mitsuba_mrt.render(mi.load_string(scene_xml(32, spp=64)), noise_threshold=1e-6).auto
+    assert "none meets the target" in tight.reason
+    assert [c.name for c in tight.candidates] == ["full", "full+oidn"]
+
+
 def test_the_scalar_variant_renders_in_full(variant):
     try:
         mi.set_variant("scalar_rgb")
