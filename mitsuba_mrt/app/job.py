@@ -211,6 +211,11 @@ def run_render_job(job: RenderJob) -> RunSummary:
     return summary
 
 
+def _compiled(count: int) -> str:
+    """The summary line's note of kernels compiled (none: nothing)."""
+    return f" ({count} kernel{'s' if count != 1 else ''} compiled)" if count else ""
+
+
 def summary_line(summary: RunSummary) -> str:
     """One terminal line: what was traced and why, where the time went, the error."""
     s, t, traced = summary, summary.timings, summary.traced
@@ -227,7 +232,7 @@ def summary_line(summary: RunSummary) -> str:
             f" + edges {t.edges:.3f} + interpolate {t.interpolate:.3f}"
             f"{f' + full render {t.full_render:.3f}' if t.full_render else ''}"
             f" + other {t.other:.3f}"
-            f"{f' ({t.compile.compiled} kernels compiled)' if t.compile.compiled else ''}")
+            f"{_compiled(t.compile.compiled)}")
     if s.error is not None:
         line += (f"; reference {s.reference_time_s:.3f} s ({s.relative_time:.2f}x), "
                  f"error {s.error:.5f}, PSNR {s.psnr_db:.2f} dB")

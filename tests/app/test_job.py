@@ -25,6 +25,8 @@ def test_summary_line_counts_the_kernels_compiled_only_when_there_were_some():
 
     timings = Timings(trace=0.5, compile=KernelCounts(compiled=3, from_disk=2)).close(1.0)
     assert "+ other 0.500 (3 kernels compiled) [" in summary_line(summary(timings))
+    timings.compile = KernelCounts(compiled=1, from_disk=2)
+    assert "+ other 0.500 (1 kernel compiled) [" in summary_line(summary(timings))
     timings.compile = KernelCounts(compiled=0, from_disk=2)
     assert "compiled" not in summary_line(summary(timings))
 
