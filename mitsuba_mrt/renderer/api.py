@@ -215,6 +215,9 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
+    for name in ("time_limit", "noise_threshold"):  # (auto's controls, no mode's own)
+        if mode != "auto" and getattr(params, name) is not None:
+            raise MRTError(f"{name} applies to mode auto only, not to mode {mode!r}")
     sensor = resolve_sensor(scene, sensor)
     spp = _spp_of(spp, sensor)
     width, height = (int(v) for v in sensor.film().crop_size())

@@ -90,6 +90,13 @@ def test_bad_controls_are_one_line_errors(name, value):
         MRTParams(**{name: value})
 
 
+@pytest.mark.parametrize("name", ["time_limit", "noise_threshold"])
+def test_controls_of_auto_given_another_mode_are_one_line_errors(variant, name):
+    scene = mi.load_string(scene_xml(32))
+    with pytest.raises(MRTError, match=f"^{name} applies to mode auto only, not to mode 'refine'$"):
+        mitsuba_mrt.render(scene, mode="refine", **{name: 1.0})
+
+
 # -- the pilot and the plan's execution -------------------------------------------------------
 
 @pytest.fixture(scope="module")
