@@ -410,3 +410,18 @@ def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
     if bad.any():
         raise MRTError(f"the nested integrator returned NaN or Inf radiance at "
                        f"{int(bad.sum())} of {bad.size} {where}")
+
+
+def check_seed(seed) -> int:
+    """``seed`` as an int, if a sampler takes it (a 32-bit unsigned
+    integer), else MRTError.
+
+    Examples
+    --------
+    >>> check_seed(7), check_seed(np.uint32(7))
+    (7, 7)
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
+            or not 0 <= seed < 1 << 32:
+        raise MRTError(f"seed must be an integer in [0, 2^32), got {seed!r}")
+    return int(seed)

@@ -27,7 +27,7 @@ from ..recon.denoise import denoise_image, oidn_available
 from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
 from ..runtime.jit import counting_kernels, recording_flags
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
-                     TracedCounts, check_radiance)
+                     TracedCounts, check_radiance, check_seed)
 from . import auto, kept_plans
 from .held_out import check_image
 from .lanes import is_jit
@@ -221,7 +221,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     sensor = resolve_sensor(scene, sensor)
     spp = _spp_of(spp, sensor)
     width, height = (int(v) for v in sensor.film().crop_size())
-    tracer = GridTracer(scene, sensor, wrapper.nested, spp, seed)
+    tracer = GridTracer(scene, sensor, wrapper.nested, spp, check_seed(seed))
     plan, pattern, grid, check, id_pass, preview_key = None, None, None, False, None, None
     kept_key = None
     if mode == "auto":
@@ -337,7 +337,7 @@ def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
     start = time.perf_counter()
     sensor = resolve_sensor(scene, sensor)
     spp = _spp_of(spp, sensor)
-    tracer = GridTracer(scene, sensor, unwrap(scene, integrator).nested, spp, seed)
+    tracer = GridTracer(scene, sensor, unwrap(scene, integrator).nested, spp, check_seed(seed))
     width, height = (int(v) for v in sensor.film().crop_size())
     xy = every_pixel(width, height)
     with recording_flags():  # (as a render's passes: theirs replay its recording)
@@ -390,7 +390,7 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
     sensor = resolve_sensor(scene, sensor)
     _spp_of(spp, sensor)  # (None still: mi.render takes the sampler's own count)
     image, _, seconds = _full_render(scene, unwrap(scene, integrator).nested, sensor,
-                                     _check_spp(spp), seed)
+                                     _check_spp(spp), check_seed(seed))
     return image, seconds
 
 

@@ -75,6 +75,10 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "-D", "res"], "name=value"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),
     (["render", SCENES / "paper_fraction.xml", "--spp", "0"], "spp must be >= 1"),
+    # a sampler's seed is a 32-bit unsigned integer (Mitsuba's own error is a TypeError)
+    (["render", SCENES / "paper_fraction.xml", "--seed", "-1"],
+     "seed must be an integer in [0, 2^32), got -1"),
+    (["render", SCENES / "paper_fraction.xml", "--seed", str(1 << 32)], "seed must be"),
     # the scene's own sampler at 0 samples: a kernel would divide by it (SIGFPE)
     (["render", SCENES / "gallery" / "cornell.xml", "-D", "spp=0"],
      "spp=0 sets the scene's sample_count, which must be >= 1"),

@@ -110,3 +110,14 @@ def test_a_scene_whose_sampler_takes_no_samples_is_refused(variant):
             call(scene)
     with pytest.raises(MRTError, match="spp must be >= 1, got 0"):
         mitsuba_mrt.render(scene, spp=0)
+
+
+def test_a_seed_a_sampler_cannot_take_is_refused(variant):
+    import mitsuba_mrt
+
+    scene = mi.load_string(small_scene_xml())
+    calls = (mitsuba_mrt.render, mitsuba_mrt.render_reference, mitsuba_mrt.render_denoised)
+    for call in calls:
+        for bad in (-1, 1 << 32, 2.5, True):
+            with pytest.raises(MRTError, match=r"^seed must be an integer in \[0, 2\^32\)"):
+                call(scene, seed=bad)
