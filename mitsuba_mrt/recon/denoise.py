@@ -20,6 +20,7 @@ is not reentrant.
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
 from collections import OrderedDict
@@ -70,6 +71,8 @@ _lock = threading.Lock()
 # "recent": quality -> {pixels: seconds of the last RECENT_CALLS calls at that
 # size, each its filter's set-up left out}
 _state: dict = {}
+# (non-empty once release() is registered to run when Python exits)
+_released_at_exit: list = []
 
 
 def _oidn():
@@ -151,12 +154,17 @@ def expected_seconds(pixels: int, quality: str) -> float:
 
 
 def _device(oidn):
-    """The process's OIDN CPU device (created and committed on first use)."""
+    """The process's OIDN CPU device (created and committed on first use;
+    it and the filters are let go when Python exits, before the extension
+    is: nanobind reports OIDN objects still alive then as leaks)."""
     device = _state.get("device")
     if device is None:
         device = oidn.Device(oidn.DeviceType.CPU)
         device.commit()
         _state["device"] = device
+        if not _released_at_exit:
+            atexit.register(release)
+            _released_at_exit.append(True)
     return device
 
 

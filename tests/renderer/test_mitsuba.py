@@ -228,3 +228,23 @@ def test_scalar_variant_gives_the_same_trace(variant, mode):
     assert np.array_equal(scalar_result.trace.shape_index, llvm_result.trace.shape_index)
     assert np.array_equal(scalar_result.trace.visible_lights, llvm_result.trace.visible_lights)
     assert np.allclose(scalar_result.image, llvm_result.image, atol=1e-4)
+
+
+def test_a_plugin_that_denoised_leaves_no_oidn_object_for_nanobind_to_report(tmp_path):
+    # the OIDN device and filters are let go before Python unloads the extension
+    import subprocess
+    import sys
+
+    pytest.importorskip("mitsuba_oidn")
+    scene = tmp_path / "scene.xml"
+    scene.write_text(small_scene_xml(16, '<integrator type="mrt"><string name="mode" '
+                                         'value="idpass"/><string name="denoise" value="oidn"/>'
+                                         '<integrator type="path"/></integrator>'))
+    child = ("import sys, mitsuba as mi, mitsuba_mrt\n"
+             "mitsuba_mrt.activate(sys.argv[2])\n"
+             "scene = mi.load_file(sys.argv[1])\n"
+             "mi.render(scene)\n")
+    proc = subprocess.run([sys.executable, "-c", child, str(scene), mi.variant()],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "leaked" not in proc.stderr
