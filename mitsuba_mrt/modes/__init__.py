@@ -62,6 +62,15 @@ def check_mode(mode: str, choices: tuple[str, ...] | None = None) -> str:
     return mode
 
 
+def check_controls(mode: str, params: MRTParams) -> None:
+    """MRTError where ``params`` set one of ``auto``'s controls
+    (``time_limit``, ``noise_threshold``) for another ``mode``, which
+    has no way to honour it."""
+    for name in ("time_limit", "noise_threshold"):
+        if mode != "auto" and getattr(params, name) is not None:
+            raise MRTError(f"{name} applies to mode auto only, not to mode {mode!r}")
+
+
 def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = MRTParams(),
                 mode: str = "paper", tracer: Tracer | None = None) -> Reconstruction:
     """Reconstruct the full image from the traced grid with one of :data:`MODES`.

@@ -20,7 +20,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError
-from ..modes import check_mode, render_modes
+from ..modes import check_controls, check_mode, render_modes
 from ..modes.plan import Plan
 from ..recon.compose import region_values
 from ..recon.denoise import denoise_image, oidn_available
@@ -215,9 +215,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
-    for name in ("time_limit", "noise_threshold"):  # (auto's controls, no mode's own)
-        if mode != "auto" and getattr(params, name) is not None:
-            raise MRTError(f"{name} applies to mode auto only, not to mode {mode!r}")
+    check_controls(mode, params)
     sensor = resolve_sensor(scene, sensor)
     spp = _spp_of(spp, sensor)
     width, height = (int(v) for v in sensor.film().crop_size())

@@ -9,6 +9,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError
+from ..modes import check_controls, check_mode, render_modes
 from ..types import MRTParams
 from .aovs import AOV_NAMES, aov_images
 from .lanes import is_jit, logical_not
@@ -183,7 +184,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
         self.params = MRTParams(**{name: (float if f.default is None else type(f.default))(
             props[name]) for name, f in own.items() if name in names})
         # Reconstruction mode (see mitsuba_mrt.renderer.api.render).
-        self.mode = str(props.get("mode", "auto"))
+        self.mode = check_mode(str(props.get("mode", "auto")), render_modes())
+        check_controls(self.mode, self.params)
         # Whether mi.render returns the id AOVs after R, G, B.
         self.output_aovs = bool(props.get("aovs", True))
         # The last MRTResult, for callers who want timings and statistics.

@@ -248,3 +248,14 @@ def test_a_plugin_that_denoised_leaves_no_oidn_object_for_nanobind_to_report(tmp
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "leaked" not in proc.stderr
+
+
+@pytest.mark.parametrize("props, message", [
+    ('<string name="mode" value="magic"/>', "unknown mode 'magic'"),
+    ('<string name="mode" value="refine"/><float name="time_limit" value="1"/>',
+     "time_limit applies to mode auto only, not to mode 'refine'"),
+    ('<string name="mode" value="fast"/><float name="noise_threshold" value="0.1"/>',
+     "noise_threshold applies to mode auto only, not to mode 'fast'")])
+def test_the_plugins_bad_mode_and_controls_are_refused_when_it_loads(variant, props, message):
+    with pytest.raises(Exception, match=message):
+        mi.load_string(small_scene_xml(16, f'<integrator type="mrt">{props}</integrator>'))
