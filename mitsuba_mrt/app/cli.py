@@ -244,13 +244,13 @@ def _bench(args) -> int:
 def _rival(args, command: str) -> int:
     from pathlib import Path
 
-    from ..bench.experiments import GALLERY_SCENES, gallery_defines
+    from ..bench.experiments import GALLERY_SCENES, check_res, gallery_defines
     from ..bench.rival import FIG1_DEFINES, run_rival
     from ..renderer.variants import activate
 
     activate(args.variant)
     root = Path(args.scenes) if args.scenes else Path(__file__).resolve().parents[2] / "scenes_xml"
-    res = args.res or (64 if args.quick else 256)
+    res = check_res(args.res) if args.res is not None else (64 if args.quick else 256)
     scenes = [(root / "gallery" / f"{name}.xml", name, gallery_defines(name, res))
               for name in (GALLERY_SCENES[:2] if args.quick else GALLERY_SCENES)]
     scenes.append((root / "paper_fig1.xml", "paper_fig1",

@@ -254,6 +254,19 @@ def _closest(values, target) -> int:
     return int(np.argmin([abs(v - target) for v in values]))
 
 
+def check_res(res: int) -> int:
+    """``res`` (an image side that ``--res`` sets), refused below 8 pixels.
+
+    Examples
+    --------
+    >>> check_res(256)
+    256
+    """
+    if res < 8:
+        raise MRTError(f"--res must be >= 8, got {res}")
+    return res
+
+
 def check_repeats(repeats) -> int:
     """``repeats`` (the timed rounds of every method), refused where it is not
     an integer >= 1.
@@ -277,9 +290,7 @@ def build_experiment(name: str, quick: bool = False, res: int | None = None) -> 
         raise MRTError(f"unknown experiment {name!r}; choose one of {', '.join(EXPERIMENTS)}, all")
     if res is not None and name == "pixels":
         raise MRTError("--res does not apply to the pixels experiment (it sweeps the resolution)")
-    if res is not None and res < 8:
-        raise MRTError(f"--res must be >= 8, got {res}")
-    side = res or (64 if quick else 200)
+    side = check_res(res) if res is not None else (64 if quick else 200)
     matte = {"integrator": "matte", "spp": 1}
 
     if name == "fraction":

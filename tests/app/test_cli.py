@@ -96,6 +96,8 @@ BAD = [
      "100000 x 100000 render needs about 2.5 TB of memory (250 bytes per pixel)"),
     (["bench", "rival", "--quick", "--repeats", "0"], "--repeats must be an integer >= 1, got 0"),
     (["bench", "rival", "--quick", "--repeats", "-2"], "--repeats must be an integer >= 1, got -2"),
+    # 0 was taken as no --res at all, and the bench ran at 256 px
+    (["bench", "rival", "--quick", "--res", "0"], "--res must be >= 8, got 0"),
 ]
 
 
