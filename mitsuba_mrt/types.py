@@ -111,6 +111,7 @@ class MRTParams:
         for name in ("time_limit", "noise_threshold"):
             value = getattr(self, name)
             if value is not None and not (isinstance(value, (int, float))
+                                          and not isinstance(value, bool)
                                           and math.isfinite(value) and value > 0):
                 raise MRTError(f"{name} must be a finite number > 0, got {value}")
 

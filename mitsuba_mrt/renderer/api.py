@@ -135,6 +135,8 @@ class GridTracer:
 
 
 def _check_spp(spp: int | None) -> int | None:
+    if spp is not None and (isinstance(spp, bool) or not isinstance(spp, (int, np.integer))):
+        raise MRTError(f"spp must be an integer >= 1, got {spp!r}")
     if spp is not None and int(spp) < 1:
         raise MRTError(f"spp must be >= 1, got {spp}")
     return None if spp is None else int(spp)

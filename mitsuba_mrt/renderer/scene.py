@@ -181,6 +181,8 @@ def resolve_sensor(scene: mi.Scene, sensor) -> mi.Sensor:
     """``sensor`` itself, or the scene's sensor of that index (checked)."""
     if isinstance(sensor, mi.Sensor):
         return sensor
+    if isinstance(sensor, bool) or not isinstance(sensor, (int, np.integer)):
+        raise MRTError(f"sensor must be an index or a Mitsuba sensor, got {sensor!r}")
     sensors = scene.sensors()
     if not 0 <= int(sensor) < len(sensors):
         raise MRTError(f"sensor index {sensor} out of range: the scene has {len(sensors)}")
@@ -205,6 +207,10 @@ def unwrap(scene: mi.Scene, integrator: mi.Integrator | None = None) -> Wrapper:
     does); anything else is traced as it is.
     """
     integrator = integrator if integrator is not None else scene.integrator()
+    if integrator is None:
+        raise MRTError("the scene has no integrator: add one to it, or pass integrator=")
+    if not isinstance(integrator, mi.Integrator):
+        raise MRTError(f"integrator must be a Mitsuba integrator, got {integrator!r}")
     params = getattr(integrator, "params", None)
     if isinstance(params, MRTParams) and hasattr(integrator, "nested"):
         return Wrapper(integrator.nested, params, getattr(integrator, "mode", None))

@@ -84,7 +84,7 @@ def test_the_planner_needs_a_candidate():
 
 
 @pytest.mark.parametrize("name", ["time_limit", "noise_threshold"])
-@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf, "soon"])
+@pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf, "soon", True])
 def test_bad_controls_are_one_line_errors(name, value):
     with pytest.raises(MRTError, match=f"^{name} must be a finite number > 0"):
         MRTParams(**{name: value})

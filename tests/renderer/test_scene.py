@@ -102,6 +102,7 @@ def test_a_scene_whose_sampler_takes_no_samples_is_refused(variant):
     import mitsuba_mrt
 
     scene = mi.load_dict({"type": "scene", "shape": {"type": "sphere"},
+                          "integrator": {"type": "path"},
                           "sensor": {"type": "perspective",
                                      "sampler": {"type": "independent", "sample_count": 0},
                                      "film": {"type": "hdrfilm", "width": 8, "height": 8}}})
@@ -110,6 +111,26 @@ def test_a_scene_whose_sampler_takes_no_samples_is_refused(variant):
             call(scene)
     with pytest.raises(MRTError, match="spp must be >= 1, got 0"):
         mitsuba_mrt.render(scene, spp=0)
+
+
+def test_an_integrator_that_is_none_or_not_one_is_refused(variant):
+    import mitsuba_mrt
+
+    bare = mi.load_dict({"type": "scene", "shape": {"type": "sphere"},
+                         "sensor": {"type": "perspective",
+                                    "film": {"type": "hdrfilm", "width": 8, "height": 8}}})
+    with pytest.raises(MRTError, match="^the scene has no integrator: add one to it, or pass"):
+        mitsuba_mrt.render(bare)
+    assert mitsuba_mrt.render(bare, integrator=mi.load_dict({"type": "path"})).image.shape[:2] \
+        == (8, 8)
+    scene = mi.load_string(small_scene_xml())
+    with pytest.raises(MRTError, match="^integrator must be a Mitsuba integrator, got 3$"):
+        mitsuba_mrt.render(scene, integrator=3)
+    for bad in ("x", 1.0, True):
+        with pytest.raises(MRTError, match="^sensor must be an index or a Mitsuba sensor"):
+            mitsuba_mrt.render(scene, sensor=bad)
+    with pytest.raises(MRTError, match=r"^spp must be an integer >= 1, got 2\.5$"):
+        mitsuba_mrt.render(scene, spp=2.5)
 
 
 def test_a_seed_a_sampler_cannot_take_is_refused(variant):
