@@ -204,7 +204,8 @@ def unwrap(scene: mi.Scene, integrator: mi.Integrator | None = None) -> Wrapper:
 
     ``integrator`` (default: the scene's own) is an ``mrt`` wrapper when it
     carries ``nested`` and ``params`` (:class:`mitsuba_mrt.renderer.plugins.MRTIntegrator`
-    does); anything else is traced as it is.
+    does); any other integrator is traced as it is; no integrator, or
+    something else, is an MRTError.
     """
     integrator = integrator if integrator is not None else scene.integrator()
     if integrator is None:
