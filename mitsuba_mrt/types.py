@@ -413,6 +413,26 @@ def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
                        f"{int(bad.sum())} of {bad.size} {where}")
 
 
+def _integer(value) -> bool:
+    """Whether ``value`` is an integer (a Python or NumPy one; not a bool)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def check_spp(spp) -> int:
+    """``spp`` as an int, if it is an integer >= 1, else MRTError.
+
+    Examples
+    --------
+    >>> check_spp(4), check_spp(np.int64(4))
+    (4, 4)
+    """
+    if not _integer(spp):
+        raise MRTError(f"spp must be an integer >= 1, got {spp!r}")
+    if spp < 1:
+        raise MRTError(f"spp must be >= 1, got {spp}")
+    return int(spp)
+
+
 def check_seed(seed) -> int:
     """``seed`` as an int, if a sampler takes it (a 32-bit unsigned
     integer), else MRTError.
@@ -422,7 +442,6 @@ def check_seed(seed) -> int:
     >>> check_seed(7), check_seed(np.uint32(7))
     (7, 7)
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
-            or not 0 <= seed < 1 << 32:
+    if not _integer(seed) or not 0 <= seed < 1 << 32:
         raise MRTError(f"seed must be an integer in [0, 2^32), got {seed!r}")
     return int(seed)

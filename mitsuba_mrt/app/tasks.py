@@ -22,7 +22,7 @@ from ..errors import MRTError, one_line
 from ..modes import check_mode, render_modes
 from ..renderer.variants import VARIANT_CHOICES
 from ..runtime import configure
-from ..types import MRTParams, check_seed
+from ..types import MRTParams, check_seed, check_spp
 from .cluster import set_jit_threads
 from .job import RenderJob, run_render_job
 from .sweep import MAX_TASKS, Sweep
@@ -80,8 +80,8 @@ def check_job_options(options: dict) -> dict:
     MRTParams(**options.get("param_overrides", {}))
     if options.get("mode") is not None:
         check_mode(options["mode"], render_modes())
-    if options.get("spp") is not None and int(options["spp"]) < 1:
-        raise MRTError(f"spp must be >= 1, got {options['spp']}")
+    if options.get("spp") is not None:
+        check_spp(options["spp"])
     check_seed(options.get("seed", 0))
     variant = options.get("variant", "auto")
     if variant not in VARIANT_CHOICES:

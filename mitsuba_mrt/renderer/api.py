@@ -27,7 +27,7 @@ from ..recon.denoise import denoise_image, oidn_available
 from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
 from ..runtime.jit import counting_kernels, recording_flags
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
-                     TracedCounts, check_radiance, check_seed)
+                     TracedCounts, check_radiance, check_seed, check_spp)
 from . import auto, kept_plans
 from .held_out import check_image
 from .lanes import is_jit
@@ -134,18 +134,10 @@ class GridTracer:
         return pass_recorded(self.scene, self.sensor, self.integrator, spp, guides, halves)
 
 
-def _check_spp(spp: int | None) -> int | None:
-    if spp is not None and (isinstance(spp, bool) or not isinstance(spp, (int, np.integer))):
-        raise MRTError(f"spp must be an integer >= 1, got {spp!r}")
-    if spp is not None and int(spp) < 1:
-        raise MRTError(f"spp must be >= 1, got {spp}")
-    return None if spp is None else int(spp)
-
-
 def _spp_of(spp: int | None, sensor) -> int:
     """``spp`` where given, else the sensor's sampler's ``sample_count`` (each >= 1)."""
     if spp is not None:
-        return _check_spp(spp)
+        return check_spp(spp)
     count = int(sensor.sampler().sample_count())
     if count < 1:  # (a kernel would divide by it: the process would die of SIGFPE)
         raise MRTError(f"the scene's sampler takes sample_count >= 1, got {count}")
@@ -388,9 +380,9 @@ def render_reference(scene: mi.Scene, integrator: mi.Integrator | None = None, *
     ``total`` is timed), the check for NaN and Inf included.
     """
     sensor = resolve_sensor(scene, sensor)
-    _spp_of(spp, sensor)  # (None still: mi.render takes the sampler's own count)
+    count = _spp_of(spp, sensor)  # (checked; None stays: mi.render takes the sampler's own)
     image, _, seconds = _full_render(scene, unwrap(scene, integrator).nested, sensor,
-                                     _check_spp(spp), check_seed(seed))
+                                     None if spp is None else count, check_seed(seed))
     return image, seconds
 
 

@@ -433,8 +433,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         if costs["passes"] <= costs["full"]:
             return None
         begin = time.perf_counter()
-        measured.append(_measured_plan(scene, pattern, tracer, params, progress, costs, notes,
-                                       STOPPED_REASON))
+        measured.append(_measured_plan(scene, pattern, tracer, params, progress, costs, notes))
         progress.estimate_s += time.perf_counter() - begin  # (the passes' check, if they go on)
         return None if measured[0].choice.kind == "denoised" else STOPPED_REASON
 
@@ -926,11 +925,11 @@ def noise_free(tracer, width: int, height: int) -> bool:
 
 
 def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress, costs: dict,
-                   notes: list, stopped: str) -> Plan:
+                   notes: list) -> Plan:
     """The planner's choice among a full render, more passes and the MRT's modes
     (measured by the pilot where its grid is cheaper than both others and
     the job is not small: :data:`AUTO_MIN_SAMPLES`), the passes having
-    ``stopped`` (why) to weigh them."""
+    stopped to weigh them (:data:`STOPPED_REASON`)."""
     begin = time.perf_counter()
     candidates = [Candidate("full", "full", tracer.spp, seconds=costs["full"],
                             error=costs["full_error"]),
@@ -946,7 +945,7 @@ def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress
         notes += pilot.notes
         pixels = pilot.pixels
     plan = choose(candidates, target_error=costs["target"])
-    plan.reason = f"{stopped}; {plan.reason}"
+    plan.reason = f"{STOPPED_REASON}; {plan.reason}"
     plan.pilot_s = progress.trace_s + progress.estimate_s + time.perf_counter() - begin
     plan.pilot_pixels, plan.notes, plan.passes = pixels, notes, list(progress.history)
     return plan

@@ -872,9 +872,8 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         round_size = next_size
         if not bakes and target is not None and progress.history:
             round_size = to_target(progress.history, target, passes.count, next_size)
-    image = passes.mean
-    if denoise:
-        image = _final_denoise(passes, progress, final, deadline, oidn_s, (height, width, 3))
+    image = (_final_denoise(passes, progress, final, deadline, oidn_s, (height, width, 3))
+             if denoise else passes.mean)
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)
 

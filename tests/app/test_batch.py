@@ -106,6 +106,7 @@ def test_tasks_are_the_product_with_one_folder_each():
             ([("res", "16"), ("res", "24")], {}, "given twice"),
             ([], {"mode": "magic"}, "unknown mode"),
             ([], {"spp": 0}, "spp must be >= 1"),
+            ([], {"spp": 2.5}, "spp must be an integer >= 1, got 2.5"),
             ([], {"seed": -1}, "seed must be an integer"),
             ([], {"param_overrides": {"sample_fraction": 2.0}}, "sample_fraction")]:
         with pytest.raises(MRTError, match=message):
