@@ -5,7 +5,7 @@
 
 Per gallery scene at its 64 spp, the MRT image ``auto`` chooses without a
 pilot (``idpass`` or ``refine``, OIDN on the grid: see
-:mod:`mitsuba_mrt.renderer.auto`; on a scene where it chooses none, ``idpass``)
+:mod:`mitsuba_mrt.renderer.auto_plans`; on a scene where it chooses none, ``idpass``)
 is checked as ``auto`` checks it (:func:`mitsuba_mrt.renderer.held_out.check_image`),
 and its relative RMS error is measured on every pixel against two independent
 full renders of ``--ref-spp`` each (their mean's noise, a quarter of their
@@ -42,7 +42,7 @@ def main():
 
     import mitsuba_mrt
     from mitsuba_mrt.bench.experiments import gallery_defines
-    from mitsuba_mrt.renderer import auto
+    from mitsuba_mrt.renderer import auto_plans
     from mitsuba_mrt.renderer.api import GridTracer
     from mitsuba_mrt.renderer.held_out import check_image
     from mitsuba_mrt.renderer.pilot import effective_area
@@ -58,7 +58,7 @@ def main():
         sensor = scene.sensors()[0]
         tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, 64, 0)
         area = effective_area(sensor.film().rfilter())
-        chosen = auto.unmeasured_plan(scene, args.res * args.res)
+        chosen = auto_plans.unmeasured_plan(scene, args.res * args.res)
         mode = chosen[0].mode if chosen else "idpass"
         result = mitsuba_mrt.render(scene, mode=mode, denoise="oidn")
         check_image(result.image, result.traced_mask, tracer, area)  # its kernels

@@ -37,7 +37,7 @@ def main():
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel
     from mitsuba_mrt.renderer.api import GridTracer
-    from mitsuba_mrt.renderer.auto import _surfaces
+    from mitsuba_mrt.renderer.auto_plans import find_surfaces
     from mitsuba_mrt.renderer.scene import unwrap
     from mitsuba_mrt.types import SeedStream
 
@@ -51,7 +51,7 @@ def main():
         width, height = (int(v) for v in sensor.film().crop_size())
         xy = every_pixel(width, height)
         integrator = unwrap(scene, None).nested
-        surfaces = _surfaces(scene, GridTracer(scene, sensor, integrator, 1, 0), width, height)
+        surfaces = find_surfaces(scene, GridTracer(scene, sensor, integrator, 1, 0), width, height)
         if surfaces is None:
             print(f"{name}: no textured diffuse surface")
             continue

@@ -28,7 +28,7 @@ from ..recon.sampling import SamplePattern, every_pixel, grid_pattern
 from ..runtime.jit import counting_kernels, recording_flags
 from ..types import (KernelCounts, MRTParams, SeedStream, Skips, SparseTrace, Timings,
                      TracedCounts, check_radiance, check_seed, check_spp)
-from . import auto, kept_plans
+from . import auto, auto_limit, auto_plans, kept_plans
 from .held_out import check_image
 from .lanes import is_jit
 from .pilot import effective_area
@@ -197,7 +197,7 @@ def _note_overrun(result: MRTResult) -> None:
     took, limit = result.timings.total, plan.time_limit
     if took > OVERRUN * limit:
         least = (": the preview is the least this image costs here"
-                 if plan.choice in (auto.PREVIEW, auto.UNDENOISED) else "")
+                 if plan.choice in (auto_limit.PREVIEW, auto_limit.UNDENOISED) else "")
         plan.notes.append(f"took {took:.3f} s, {took / limit:.1f}x the time limit of "
                           f"{limit:.3g} s{least}")
 
@@ -246,8 +246,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     begin = time.perf_counter()
     result = _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
     if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
-        auto.note_preview_after(preview_key, time.perf_counter() - begin,
-                                result.timings.denoise, width * height)
+        auto_limit.note_preview_after(preview_key, time.perf_counter() - begin,
+                                      result.timings.denoise, width * height)
     if kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
         kept_plans.note_render(kept_key, tracer.spp, result.timings.total,
                                recordings() == recorded)
@@ -266,7 +266,7 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
     plan.choice = replace(plan.choice, error=held.error)
     plan.target_error, plan.pilot_pixels = held.full_error, 2 * held.pixels
     plan.pilot_s += held.seconds
-    if auto.keeps(held):
+    if auto_plans.keeps(held):
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
         key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
@@ -342,7 +342,7 @@ def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,
     return image, time.perf_counter() - start
 
 
-def _passes_result(outcome: auto.AutoOutcome, tracer: GridTracer, params: MRTParams,
+def _passes_result(outcome: auto_plans.AutoOutcome, tracer: GridTracer, params: MRTParams,
                    start: float) -> MRTResult:
     """The image ``auto``'s denoised passes made (:mod:`.progressive`)."""
     image, progress, plan = outcome.image, outcome.progress, outcome.plan

@@ -17,7 +17,7 @@ each, with the state that is not a cache and stays.
 from __future__ import annotations
 
 from ..recon import denoise, llvm_arrays, rbf_fast
-from . import auto, develop, guides, kept_plans, pixel_filter, replay
+from . import auto_limit, develop, guides, kept_plans, pixel_filter, replay
 
 
 def clear_caches() -> None:
@@ -27,13 +27,13 @@ def clear_caches() -> None:
     kernels again (Dr.Jit's own cache of compiled kernels is not cleared).
     """
     replay.clear_recordings()
-    auto._first_round_s.clear()
-    auto._final_denoise_s.clear()
-    auto._launch_costs.clear()
-    auto._probe_recording_s.clear()
-    auto._probe_execute.clear()
-    auto._preview_after_s.clear()
-    auto._preview_rate.clear()
+    auto_limit._first_round_s.clear()
+    auto_limit._final_denoise_s.clear()
+    auto_limit._launch_costs.clear()
+    auto_limit._probe_recording_s.clear()
+    auto_limit._probe_execute.clear()
+    auto_limit._preview_after_s.clear()
+    auto_limit._preview_rate.clear()
     kept_plans.clear()
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()

@@ -16,7 +16,7 @@ import mitsuba_mrt
 from mitsuba_mrt import MRTError, MRTParams
 from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
-from mitsuba_mrt.renderer import auto, kept_plans, pilot
+from mitsuba_mrt.renderer import auto, auto_limit, auto_plans, kept_plans, pilot
 from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
 from mitsuba_mrt.types import Timings
@@ -143,7 +143,7 @@ def test_the_pilots_errors_follow_the_truth(scene):
 
 def forced(monkeypatch, candidate):
     monkeypatch.setattr(auto, "run_auto",
-                        lambda *args, **kwargs: auto.AutoOutcome(Plan(candidate, "test")))
+                        lambda *args, **kwargs: auto_plans.AutoOutcome(Plan(candidate, "test")))
 
 
 def test_a_full_render_the_planner_chooses_is_mi_renders_own(scene, monkeypatch):
@@ -179,7 +179,7 @@ def test_diffuse_surfaces_under_point_lights_take_the_id_pass(variant):
     result = mitsuba_mrt.render(scene)
     assert result.mode_used == "idpass" and result.params.denoise == "oidn"
     assert result.auto.choice.label == "idpass+oidn @ 16 spp"
-    assert result.auto.reason == auto.HOME_REASON and not result.auto.passes
+    assert result.auto.reason == auto_plans.HOME_REASON and not result.auto.passes
     truth = mitsuba_mrt.render_reference(scene, spp=256)[0]
     full = mitsuba_mrt.render_reference(scene)[0]
     assert np.mean((result.image - truth) ** 2) < np.mean((full - truth) ** 2)
@@ -196,7 +196,7 @@ def test_the_id_pass_plan_is_not_taken_under_a_limit_a_threshold_or_an_area_ligh
         '<bsdf type="roughplastic"/>')
     assert not lit_diffuse_by_points(mi.load_string(glossy))
     for kwargs in ({"time_limit": 1e-6}, {"noise_threshold": 0.5}):
-        assert mitsuba_mrt.render(point_lit, **kwargs).auto.reason != auto.HOME_REASON
+        assert mitsuba_mrt.render(point_lit, **kwargs).auto.reason != auto_plans.HOME_REASON
 
 
 def test_a_time_limit_the_id_pass_plan_fits_takes_it_and_traces_the_id_pass_once(variant,
@@ -218,7 +218,7 @@ def test_a_time_limit_the_id_pass_plan_fits_takes_it_and_traces_the_id_pass_once
     result = mitsuba_mrt.render(scene, time_limit=60.0)
     plan = result.auto
     assert result.mode_used == "idpass" and result.params.denoise == "oidn"
-    assert plan.reason == auto.WITHIN_REASON.format(auto.HOME_REASON)
+    assert plan.reason == auto_limit.WITHIN_REASON.format(auto_plans.HOME_REASON)
     assert plan.time_limit == 60.0 and not plan.passes and plan.choice.error is None
     assert id_passes == [384 * 384]  # traced to be timed, then reused by the mode
     # the same plan's image as without a limit (same seed), unchecked
@@ -231,7 +231,8 @@ def test_a_time_limit_too_short_for_the_id_pass_plan_traces_no_id_pass(variant, 
 
     def no_id_pass(*args):
         raise AssertionError("the id pass was traced")
-    monkeypatch.setattr(auto, "_id_pass", no_id_pass)
+    monkeypatch.setattr(auto_plans, "trace_id_pass", no_id_pass)
+    monkeypatch.setattr(auto_limit, "trace_id_pass", no_id_pass)
     for limit in (1e-6, 0.02):
         assert mitsuba_mrt.render(scene, time_limit=limit).mode_used != "idpass"
 
@@ -241,49 +242,49 @@ def test_a_last_probe_that_rules_the_id_pass_plan_out_spares_the_next_render_s_p
     scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
     for limit in (None, 0.02):  # (kernels recorded: the probes below replay)
         mitsuba_mrt.render(scene, time_limit=limit)
-    monkeypatch.setattr(auto, "_probe_execute", {})
+    monkeypatch.setattr(auto_limit, "_probe_execute", {})
     monkeypatch.setattr(kept_plans, "_plans", {})  # (the plans, planned anew)
     probes = []
-    within = auto._mrt_within
+    within = auto_limit.mrt_within
 
     def spy(*args):
         out = within(*args)
         probes.append(out[2] is not None)
         return out
-    monkeypatch.setattr(auto, "_mrt_within", spy)
+    monkeypatch.setattr(auto_limit, "mrt_within", spy)
     # the first render probes, and its probe says the plan cannot end in 20 ms; the
     # next is not probed for it; a longer limit is probed again, and takes the plan
     assert mitsuba_mrt.render(scene, time_limit=0.02).mode_used != "idpass"
     assert mitsuba_mrt.render(scene, time_limit=0.02).mode_used != "idpass"
     assert mitsuba_mrt.render(scene, time_limit=60.0).mode_used == "idpass"
-    assert probes == [True, False, True] and len(auto._probe_execute) == 1
+    assert probes == [True, False, True] and len(auto_limit._probe_execute) == 1
 
 
 def test_a_time_limit_takes_the_checked_plan_again_at_the_most_spp_that_fit(variant,
                                                                           monkeypatch):
     scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
     plain = mitsuba_mrt.render(scene)  # the default target: its check keeps the image
-    assert plain.auto.reason == auto.HOME_REASON
+    assert plain.auto.reason == auto_plans.HOME_REASON
     ((key, kept),) = kept_plans._plans.items()
-    assert kept.choice.label == "idpass+oidn @ 16 spp" and kept.reason == auto.HOME_REASON
+    assert kept.choice.label == "idpass+oidn @ 16 spp" and kept.reason == auto_plans.HOME_REASON
     assert 0 < kept.seconds[16][0] < plain.timings.total  # (its check left out)
     assert 0 < kept.growing[0] < 1  # (the growing traces' share of its seconds)
 
     def no_probe(*args):
         raise AssertionError("the plan was probed")
     with monkeypatch.context() as m:
-        m.setattr(auto, "_grid_probe", no_probe)
+        m.setattr(auto_limit, "_grid_probe", no_probe)
         m.setattr(kept_plans, "MOST_SPP_FACTOR", 1)  # (the checked spp the most)
         result = mitsuba_mrt.render(scene, time_limit=60.0)
         plan = result.auto
         assert result.mode_used == "idpass" and result.params.denoise == "oidn"
-        assert plan.reason == auto.MEASURED_REASON.format(auto.HOME_REASON, 16,
+        assert plan.reason == auto_limit.MEASURED_REASON.format(auto_plans.HOME_REASON, 16,
                                                           kept.seconds[16][0])
         assert plan.time_limit == 60.0 and plan.choice.seconds == kept.seconds[16][0]
         assert np.array_equal(result.image, plain.image)  # the same seed's image, unchecked
     assert len(kept.seconds[16]) == 2  # (the time-limited render's seconds too)
     more = mitsuba_mrt.render(scene, time_limit=60.0, spp=32)  # (another key: planned anew)
-    assert not more.auto.reason.startswith(auto.HOME_REASON + "; at")
+    assert not more.auto.reason.startswith(auto_plans.HOME_REASON + "; at")
     # a long limit: four times the spp; the time of a render that replayed is
     # kept (the first recorded), and the next expects it
     result = mitsuba_mrt.render(scene, time_limit=60.0)
@@ -295,11 +296,11 @@ def test_a_time_limit_takes_the_checked_plan_again_at_the_most_spp_that_fit(vari
     # or under a quality target
     kept.seconds = {16: [1e3]}
     assert not mitsuba_mrt.render(scene, time_limit=60.0).auto.reason.startswith(
-        auto.HOME_REASON + "; at")
+        auto_plans.HOME_REASON + "; at")
     kept.seconds = {16: [0.0]}
     for kwargs in ({"sample_fraction": 0.2}, {"noise_threshold": 0.5}):
         other = mitsuba_mrt.render(scene, time_limit=60.0, **kwargs)
-        assert not other.auto.reason.startswith(auto.HOME_REASON + "; at")
+        assert not other.auto.reason.startswith(auto_plans.HOME_REASON + "; at")
 
 
 def test_a_kept_plan_s_first_render_that_compiled_does_not_shrink_its_expected_time():
@@ -326,7 +327,7 @@ def test_a_sampler_that_bakes_its_spp_keeps_the_checked_plan_s_spp_under_a_time_
                                                                              POINT_LIGHT))
     mitsuba_mrt.render(scene)  # (kept by its check)
     result = mitsuba_mrt.render(scene, time_limit=60.0)  # a new spp would compile
-    assert result.auto.reason.startswith(auto.HOME_REASON + "; at 16 spp")
+    assert result.auto.reason.startswith(auto_plans.HOME_REASON + "; at 16 spp")
 
 
 def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(variant):
@@ -335,9 +336,9 @@ def test_a_large_image_without_an_environment_map_takes_the_checked_id_pass(vari
     result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
     plan = result.auto
     assert result.mode_used == "idpass" and result.params.denoise == "oidn"
-    assert plan.reason == auto.WIDE_REASON and not plan.passes
+    assert plan.reason == auto_plans.WIDE_REASON and not plan.passes
     assert plan.pilot_pixels >= 2 * 1024 and plan.target_error > 0
-    assert plan.choice.error <= auto.CHECK_SLACK * plan.target_error
+    assert plan.choice.error <= auto_plans.CHECK_SLACK * plan.target_error
     assert result.timings.check >= plan.pilot_s - 1e-9 > 0
 
 
@@ -369,7 +370,7 @@ def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, mon
     from mitsuba_mrt.types import SeedStream
 
     scene = mi.load_string(scene_xml(512, spp=16))
-    monkeypatch.setattr(auto, "WIDE_EDGE_SHARE", 0.0)  # the ball's outline is too much
+    monkeypatch.setattr(auto_plans, "WIDE_EDGE_SHARE", 0.0)  # the ball's outline is too much
     id_traces = []
     trace = api.trace_pixels
 
@@ -388,7 +389,7 @@ def test_a_large_image_with_many_edges_between_ids_takes_the_passes(variant, mon
 
 
 def test_an_id_pass_image_that_misses_its_check_gives_way_to_the_passes(variant, monkeypatch):
-    monkeypatch.setattr(auto, "CHECK_SLACK", -1.0)  # no estimate is kept
+    monkeypatch.setattr(auto_plans, "CHECK_SLACK", -1.0)  # no estimate is kept
     result = mitsuba_mrt.render(mi.load_string(scene_xml(512, spp=16)))
     plan = result.auto
     # the passes are kept, not the MRT's plan (nor its time, for a time limit)
@@ -415,7 +416,7 @@ def test_an_environment_map_takes_the_checked_refined_edges_a_small_image_the_pa
     assert not environment_map(mi.load_string(constant))
     assert not environment_map(mi.load_string(scene_xml(256, spp=16)))
     result = mitsuba_mrt.render(mi.load_string(lit))
-    assert result.auto.reason == auto.SKY_REASON and result.mode_used == "refine"
+    assert result.auto.reason == auto_plans.SKY_REASON and result.mode_used == "refine"
     assert result.params.denoise == "oidn" and result.auto.choice.error is not None
     assert mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64))).auto.passes
 
@@ -465,18 +466,18 @@ def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant
     area_lit = mi.load_string(scene_xml(384, spp=16))
     first = {name: mitsuba_mrt.render(s) for name, s in (("mrt", point_lit),
                                                           ("passes", area_lit))}
-    assert first["mrt"].auto.reason == auto.HOME_REASON and first["passes"].auto.passes
+    assert first["mrt"].auto.reason == auto_plans.HOME_REASON and first["passes"].auto.passes
 
     def not_again(*args, **kwargs):
         raise AssertionError("the plan was chosen anew")
     with monkeypatch.context() as m:
-        for module, name in ((auto, "noise_free"), (auto, "_mrt_by_kind"),
+        for module, name in ((auto, "noise_free"), (auto, "mrt_by_kind"),
                              (progressive, "_estimate"), (api, "check_image")):
             m.setattr(module, name, not_again)
         mrt, passes = mitsuba_mrt.render(point_lit), mitsuba_mrt.render(area_lit)
         mrt = mitsuba_mrt.render(point_lit)  # (Dr.Jit records a layout's first two calls)
     # the MRT plan: the same image (the same seed), unchecked, its replay's time kept
-    assert mrt.auto.reason == auto.AGAIN_REASON.format(auto.HOME_REASON)
+    assert mrt.auto.reason == auto.AGAIN_REASON.format(auto_plans.HOME_REASON)
     assert mrt.auto.choice.label == "idpass+oidn @ 16 spp" and mrt.timings.check == 0
     assert np.array_equal(mrt.image, first["mrt"].image)
     (kept,) = [k for k in kept_plans._plans.values() if k.choice.kind == "mrt"]
@@ -505,12 +506,12 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
     # OIDN would end past the limit even right after the grid: the preview goes without
-    assert plan.reason == auto.PREVIEW_REASON and plan.choice == auto.UNDENOISED
+    assert plan.reason == auto_limit.PREVIEW_REASON and plan.choice == auto_limit.UNDENOISED
     assert result.mode == "auto" and result.mode_used == "fast" and result.spp == 1
     assert result.params.denoise == "none" and result.timings.denoise == 0
     assert plan.time_limit == 1e-6 and plan.passes == []
     assert np.isfinite(result.image).all() and result.traced.grid > 0
-    assert plan.notes[0] == auto.UNDENOISED_NOTE
+    assert plan.notes[0] == auto_limit.UNDENOISED_NOTE
     assert plan.notes[-1].endswith("the time limit of 1e-06 s: the preview is the least "
                                    "this image costs here")
     # the grid that told the plan is the preview's own: the image is the mode's
@@ -519,20 +520,20 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
 
 
 def test_a_preview_is_denoised_where_the_limit_leaves_oidn_room(scene, monkeypatch):
-    monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
+    monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
     result = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert result.auto.choice.name == auto.PREVIEW.name and result.params.denoise == "oidn"
-    assert auto.UNDENOISED_NOTE not in result.auto.notes and result.timings.denoise > 0
+    assert result.auto.choice.name == auto_limit.PREVIEW.name and result.params.denoise == "oidn"
+    assert auto_limit.UNDENOISED_NOTE not in result.auto.notes and result.timings.denoise > 0
 
 
 def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scene,
                                                                             monkeypatch):
     # without the preview (which a limit this small gets) the first pass is denoised
-    monkeypatch.setattr(auto, "_preview_due", lambda *args: False)
+    monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: False)
     release()  # OIDN's cost unknown: the last call is expected to take its prior
     # no launch measured before: the first is the least, 1 spp (where earlier
     # renders replayed a larger launch, it may cost less than recording 1 spp)
-    monkeypatch.setattr(auto, "_launch_costs", {})
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
     assert plan.reason == "denoised passes: the time limit" and result.spp == 1
@@ -541,27 +542,27 @@ def test_a_time_limit_alone_estimates_nothing_and_ends_after_the_first_pass(scen
 
 
 def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, monkeypatch):
-    monkeypatch.setattr(auto, "_launch_costs", {})  # (not earlier tests' launches)
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})  # (not earlier tests' launches)
     first = mitsuba_mrt.render(scene, time_limit=10.0)  # passes: their launches are kept
     assert first.auto.choice.kind == "denoised"
-    monkeypatch.setattr(auto, "_first_round_s", {})  # no first round's time to go by
+    monkeypatch.setattr(auto_limit, "_first_round_s", {})  # no first round's time to go by
 
     def probe(*args):
         raise AssertionError("the grid was probed")
-    monkeypatch.setattr(auto, "_grid_probe", probe)
+    monkeypatch.setattr(auto_limit, "_grid_probe", probe)
     again = mitsuba_mrt.render(scene, time_limit=10.0)
     assert again.auto.choice.kind == "denoised"
 
 
 def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monkeypatch):
-    monkeypatch.setattr(auto, "_launch_costs", {})
-    monkeypatch.setattr(auto, "_first_round_s", {})
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
+    monkeypatch.setattr(auto_limit, "_first_round_s", {})
     # passes: their launches are kept
     assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
-    (key,) = auto._launch_costs
-    auto._first_round_s[key] = 1e3  # a first round that took far longer than the limit
+    (key,) = auto_limit._launch_costs
+    auto_limit._first_round_s[key] = 1e3  # a first round that took far longer than the limit
     slow = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert slow.auto.reason == auto.PREVIEW_REASON and key not in auto._first_round_s
+    assert slow.auto.reason == auto_limit.PREVIEW_REASON and key not in auto_limit._first_round_s
     # a preview traces no round: the next render plans from the passes' launches
     again = mitsuba_mrt.render(scene, time_limit=10.0)
     assert again.auto.choice.kind == "denoised"
@@ -571,11 +572,11 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
     # denoising textured surfaces as their shading adds SHADING_EXTRA to OIDN's
     # expected time: where that alone would end past the limit, the passes
     # denoise plainly (no surfaces looked up) rather than take the preview
-    monkeypatch.setattr(auto, "expected_seconds", lambda pixels, quality: 0.1)
-    monkeypatch.setattr(auto, "_launch_costs", {})
-    monkeypatch.setattr(auto, "textured_diffuse_shapes", lambda scene: np.array([False, True]))
-    assert not auto._preview_due(1.0, 0.88, 100, "fast")
-    assert auto._preview_due(1.0, 0.88, 100, "fast", shading=True)
+    monkeypatch.setattr(auto_limit, "expected_seconds", lambda pixels, quality: 0.1)
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
+    monkeypatch.setattr(auto_limit, "textured_diffuse_shapes", lambda scene: np.array([False, True]))
+    assert not auto_limit._preview_due(1.0, 0.88, 100, "fast")
+    assert auto_limit._preview_due(1.0, 0.88, 100, "fast", shading=True)
     key = ("scene", 100)
     tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
                              pass_recorded=lambda spp: False)
@@ -584,8 +585,8 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
     started = __import__("time").perf_counter()
     outcomes = {}
     for first_s in (0.5, 0.95, 1.05):  # the last first round ended this long after the start
-        monkeypatch.setattr(auto, "_first_round_s", {key: first_s})
-        outcome, surfaces, found = auto._preview_first(None, pattern, tracer, params, started,
+        monkeypatch.setattr(auto_limit, "_first_round_s", {key: first_s})
+        outcome, surfaces, found = auto_limit.preview_first(None, pattern, tracer, params, started,
                                                        key, [])
         outcomes[first_s] = (outcome is not None, surfaces, found)
     # (plain OIDN against PREVIEW_SLACK times the limit, 1.1 s; the shading,
@@ -597,31 +598,31 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
 
 def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_launched(
         monkeypatch):
-    monkeypatch.setattr(auto, "_launch_costs", {})
-    monkeypatch.setattr(auto, "_probe_recording_s", {})
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
+    monkeypatch.setattr(auto_limit, "_probe_recording_s", {})
 
     def probe(recorded, host, compile=0.0):
-        return auto._Probe(None, host + 0.01, 0.005, host, recorded, compile)
+        return auto_limit._Probe(None, host + 0.01, 0.005, host, recorded, compile)
     key = ("scene", "sensor", "integrator", 256 * 256)
     # a recording probe's own time holds a recording: nothing to add, its time is kept
-    assert auto._passes_recording_s(key, probe(True, 0.030)) == 0.0
+    assert auto_limit._passes_recording_s(key, probe(True, 0.030)) == 0.0
     # a replayed probe's does not: the passes' first launch adds what recording took more
-    assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
-    assert auto._passes_recording_s(("other",) + key[1:], probe(False, 0.004)) == 0.0
+    assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
+    assert auto_limit._passes_recording_s(("other",) + key[1:], probe(False, 0.004)) == 0.0
     # a recording that compiled a kernel keeps its time less the compilation
-    assert auto._passes_recording_s(key, probe(True, 0.330, compile=0.300)) == 0.0
-    assert auto._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
+    assert auto_limit._passes_recording_s(key, probe(True, 0.330, compile=0.300)) == 0.0
+    assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
     tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
                              pass_recorded=lambda spp: False)
-    auto._kept_cost(key, tracer).add(1, 0.02, recorded=True)
-    assert auto._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
+    auto_limit.kept_cost(key, tracer).add(1, 0.02, recorded=True)
+    assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
     # another trace (a full render denoised at 1 spp) recorded the passes' first launch
     other = ("scene 2",) + key[1:]
-    assert auto._passes_recording_s(other, probe(True, 0.030)) == 0.0
-    assert auto._passes_recording_s(other, probe(False, 0.004)) == pytest.approx(0.026)
+    assert auto_limit._passes_recording_s(other, probe(True, 0.030)) == 0.0
+    assert auto_limit._passes_recording_s(other, probe(False, 0.004)) == pytest.approx(0.026)
     recorded = SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp: spp == 1)
-    auto._kept_cost(other, recorded)
-    assert auto._passes_recording_s(other, probe(False, 0.004)) == 0.0
+    auto_limit.kept_cost(other, recorded)
+    assert auto_limit._passes_recording_s(other, probe(False, 0.004)) == 0.0
 
 
 def test_the_passes_last_oidn_call_takes_the_preset_asked_for_or_the_one_that_pays(scene):
@@ -666,13 +667,13 @@ def test_passes_of_at_most_two_spp_multiply_their_shading_by_the_albedo_denoised
     from mitsuba_mrt.recon.denoise import CLEAN_TEXTURE_SPP
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.renderer.api import GridTracer
-    from mitsuba_mrt.renderer.auto import _surfaces
+    from mitsuba_mrt.renderer.auto_plans import find_surfaces
     from mitsuba_mrt.renderer.scene import unwrap
 
     scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/spot_textures.xml", res=64)
     sensor = scene.sensors()[0]
     tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, 64, 0)
-    surfaces = _surfaces(scene, tracer, 64, 64)
+    surfaces = find_surfaces(scene, tracer, 64, 64)
     cleaned = {}
     for spp in (CLEAN_TEXTURE_SPP, CLEAN_TEXTURE_SPP + 1):
         image, _, progress = progressive.run_passes(
@@ -719,17 +720,17 @@ def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_lig
     gallery = ROOT / "scenes_xml/gallery"
     checker = mitsuba_mrt.load_scene(gallery / "checker_border.xml", res=256, spp=32)
     assert not transmits(checker)
-    assert auto.unmeasured_plan(checker, 256 * 256) == (auto.HOME, auto.TEXTURED_REASON)
+    assert auto_plans.unmeasured_plan(checker, 256 * 256) == (auto_plans.HOME, auto_plans.TEXTURED_REASON)
     # few edges between ids (the border's), and the check keeps the image
     result = mitsuba_mrt.render(checker)
-    assert result.mode_used == "idpass" and result.auto.reason == auto.TEXTURED_REASON
+    assert result.mode_used == "idpass" and result.auto.reason == auto_plans.TEXTURED_REASON
     assert result.auto.choice.label == "idpass+oidn @ 16 spp, grid of 20 % of the pixels"
     assert not result.auto.notes and np.isfinite(result.image).all()
     # the room's glass shows what lies behind it, which no id tells apart
     room = mitsuba_mrt.load_scene(gallery / "room.xml", res=128)
-    assert transmits(room) and auto.unmeasured_plan(room, 128 * 128) is None
+    assert transmits(room) and auto_plans.unmeasured_plan(room, 128 * 128) is None
     # at 512 x 512 the room's kind no longer matters
-    assert auto.unmeasured_plan(room, 512 * 512) == (auto.HOME, auto.WIDE_REASON)
+    assert auto_plans.unmeasured_plan(room, 512 * 512) == (auto_plans.HOME, auto_plans.WIDE_REASON)
 
 
 def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(variant):
@@ -738,9 +739,9 @@ def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(
     gallery = ROOT / "scenes_xml/gallery"
     box = mitsuba_mrt.load_scene(gallery / "cornell.xml", res=192, spp=64)
     assert has_mirrors(box) and transmits(box) and not textured_diffuse_shapes(box).any()
-    assert auto.unmeasured_plan(box, 192 * 192) == (auto.SKY, auto.SPECULAR_REASON)
+    assert auto_plans.unmeasured_plan(box, 192 * 192) == (auto_plans.SKY, auto_plans.SPECULAR_REASON)
     result = mitsuba_mrt.render(box)
-    assert result.auto.reason == auto.SPECULAR_REASON and result.mode_used == "refine"
+    assert result.auto.reason == auto_plans.SPECULAR_REASON and result.mode_used == "refine"
     assert result.params.denoise == "oidn" and np.isfinite(result.image).all()
     # below 512 x 512 the grid is twice as dense, at half the spp: the image is
     # the mode's own at that grid and spp (same seed)
@@ -749,14 +750,14 @@ def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(
     same = mitsuba_mrt.render(box, mode="refine", denoise="oidn", spp=32, sample_fraction=0.2)
     assert np.array_equal(result.image, same.image)
     again = mitsuba_mrt.render(box)  # the kept plan, its grid with it
-    assert again.auto.reason.startswith(auto.SPECULAR_REASON) and again.auto.passes == []
+    assert again.auto.reason.startswith(auto_plans.SPECULAR_REASON) and again.auto.passes == []
     assert again.auto.choice.fraction == 0.2 and np.array_equal(again.image, same.image)
     # from 512 x 512 on the id pass, as on any scene without an environment map
-    assert auto.unmeasured_plan(box, 512 * 512) == (auto.HOME, auto.WIDE_REASON)
+    assert auto_plans.unmeasured_plan(box, 512 * 512) == (auto_plans.HOME, auto_plans.WIDE_REASON)
     # neither mirrors nor glass: the passes
     plain = mitsuba_mrt.load_scene(gallery / "instanced.xml", res=64)
     assert not (has_mirrors(plain) or transmits(plain))
-    assert auto.unmeasured_plan(plain, 64 * 64) is None
+    assert auto_plans.unmeasured_plan(plain, 64 * 64) is None
 
 
 def test_a_time_limit_is_filled_with_passes(scene):
@@ -1052,7 +1053,7 @@ def test_a_launch_s_kernels_run_time_and_the_cost_s_first_launch_are_kept(scene,
     from mitsuba_mrt.renderer.replay import clear_recordings
 
     kept = progressive.LaunchCost(spp_compiles=False)
-    monkeypatch.setattr(auto, "_kept_cost", lambda key, tracer: kept)
+    monkeypatch.setattr(auto, "kept_cost", lambda key, tracer: kept)
     clear_recordings()  # (the first launch records its replay, and measures that)
     mitsuba_mrt.render(scene, time_limit=10.0)
     first, *rest = kept.launches
@@ -1236,52 +1237,52 @@ def test_a_stratified_pilot_reference_s_noise_is_its_halves_difference():
 
 
 def test_a_preview_leaves_its_later_stages_what_the_last_previews_took(scene, monkeypatch):
-    monkeypatch.setattr(auto, "_preview_after_s", {})
-    monkeypatch.setattr(auto, "_preview_rate", [])
-    monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
+    monkeypatch.setattr(auto_limit, "_preview_after_s", {})
+    monkeypatch.setattr(auto_limit, "_preview_rate", [])
+    monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
     for _ in range(3):  # (the grid's kernels recorded: a pooled launch replays them)
         mitsuba_mrt.render(scene, time_limit=10.0)
-    (key,) = auto._preview_after_s
-    auto._preview_after_s.clear()
-    auto._preview_rate.clear()
+    (key,) = auto_limit._preview_after_s
+    auto_limit._preview_after_s.clear()
+    auto_limit._preview_rate.clear()
     first = mitsuba_mrt.render(scene, time_limit=10.0)
     # nothing kept: the bound per pixel, far below a 10-s limit on this image
-    assert first.auto.reason == auto.PREVIEW_REASON and first.spp == PREVIEW_MAX_SPP
-    (took,) = auto._preview_after_s[key]
+    assert first.auto.reason == auto_limit.PREVIEW_REASON and first.spp == PREVIEW_MAX_SPP
+    (took,) = auto_limit._preview_after_s[key]
     assert 0.0 < took < first.timings.total - first.timings.trace
     # ... and its time per pixel beyond OIDN, for other scenes' first previews
     pixels = first.image.shape[0] * first.image.shape[1]
-    (rate,) = auto._preview_rate
+    (rate,) = auto_limit._preview_rate
     assert rate * pixels == pytest.approx(took - first.timings.denoise)
     # previews whose stages after the grid filled the limit: no launch pooled
-    auto._preview_after_s[key] = [9.5, 9.6, 0.0]
+    auto_limit._preview_after_s[key] = [9.5, 9.6, 0.0]
     assert mitsuba_mrt.render(scene, time_limit=10.0).spp == 1
 
 
 def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(scene,
                                                                             monkeypatch):
-    monkeypatch.setattr(auto, "_preview_after_s", {})
-    monkeypatch.setattr(auto, "_preview_due", lambda *args: True)
-    monkeypatch.setattr(auto, "FINISH_PER_PIXEL", 1.0)  # a bound of days: never the least
+    monkeypatch.setattr(auto_limit, "_preview_after_s", {})
+    monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
+    monkeypatch.setattr(auto_limit, "FINISH_PER_PIXEL", 1.0)  # a bound of days: never the least
     for _ in range(2):  # (the grid's kernels recorded: a pooled launch replays them)
         mitsuba_mrt.render(scene, time_limit=10.0)
     pixels = 512 * 512
     # other previews took a few ms on such an image: launches pooled, OIDN run
-    monkeypatch.setattr(auto, "_preview_rate", [1e-9, 1e-8])
-    auto._preview_after_s.clear()
+    monkeypatch.setattr(auto_limit, "_preview_rate", [1e-9, 1e-8])
+    auto_limit._preview_after_s.clear()
     filled = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert filled.auto.reason == auto.PREVIEW_REASON and filled.spp == PREVIEW_MAX_SPP
-    assert filled.auto.choice.denoise and len(auto._preview_after_s) == 1
+    assert filled.auto.reason == auto_limit.PREVIEW_REASON and filled.spp == PREVIEW_MAX_SPP
+    assert filled.auto.choice.denoise and len(auto_limit._preview_after_s) == 1
     # 20 s: past the limit's slack, the preview goes without OIDN; its time
     # per pixel is kept for the next, but not as the scene's denoised stages
-    auto._preview_after_s.clear()
-    auto._preview_rate[:] = [20.0 / pixels]
+    auto_limit._preview_after_s.clear()
+    auto_limit._preview_rate[:] = [20.0 / pixels]
     bare = mitsuba_mrt.render(scene, time_limit=10.0)
-    assert not bare.auto.choice.denoise and auto.UNDENOISED_NOTE in bare.auto.notes
-    assert not auto._preview_after_s and len(auto._preview_rate) == 2
-    assert auto._preview_rate[-1] * pixels < 10.0
+    assert not bare.auto.choice.denoise and auto_limit.UNDENOISED_NOTE in bare.auto.notes
+    assert not auto_limit._preview_after_s and len(auto_limit._preview_rate) == 2
+    assert auto_limit._preview_rate[-1] * pixels < 10.0
     # a process that has made no preview: the bound, here without OIDN
-    auto._preview_rate.clear()
+    auto_limit._preview_rate.clear()
     assert not mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.denoise
 
 
@@ -1293,11 +1294,11 @@ def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
     def due(end, first_end, *args):
         ends.append(end - first_end)
         return True
-    monkeypatch.setattr(auto, "_preview_due", due)
+    monkeypatch.setattr(auto_limit, "_preview_due", due)
     for slack in (1.0, 3.0):
-        monkeypatch.setattr(auto, "_launch_costs", {})
-        monkeypatch.setattr(auto, "_first_round_s", {})
-        monkeypatch.setattr(auto, "PROBED_SLACK", slack)
+        monkeypatch.setattr(auto_limit, "_launch_costs", {})
+        monkeypatch.setattr(auto_limit, "_first_round_s", {})
+        monkeypatch.setattr(auto_limit, "PROBED_SLACK", slack)
         mitsuba_mrt.render(scene, time_limit=10.0)
     # (each render's start and its probe's end a second apart at most)
     assert ends[-1] - ends[0] == pytest.approx(20.0, abs=1.0)
@@ -1307,20 +1308,20 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.renderer.api import GridTracer
 
-    monkeypatch.setattr(auto, "_launch_costs", {})
-    monkeypatch.setattr(auto, "_first_round_s", {})
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
+    monkeypatch.setattr(auto_limit, "_first_round_s", {})
     scene = mi.load_string(scene_xml(64, spp=16, sampler="stratified"))
     assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
-    (key,) = auto._launch_costs  # passes launched only at 9 spp before, as a kept plan's
-    cost = auto._launch_costs[key] = progressive.LaunchCost([(9, 0.2, False)],
+    (key,) = auto_limit._launch_costs  # passes launched only at 9 spp before, as a kept plan's
+    cost = auto_limit._launch_costs[key] = progressive.LaunchCost([(9, 0.2, False)],
                                                             spp_compiles=True)
     assert cost(1) == math.inf and cost.cheapest() == 9
-    auto._first_round_s.clear()
+    auto_limit._first_round_s.clear()
     # (the first render's 1-spp launches recorded: as if they had not)
     monkeypatch.setattr(GridTracer, "pass_recorded", lambda self, spp, **_: False)
     preview = mitsuba_mrt.render(scene, time_limit=1e-6)
-    assert preview.auto.reason == auto.PREVIEW_REASON
-    assert auto.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes
+    assert preview.auto.reason == auto_limit.PREVIEW_REASON
+    assert auto_limit.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes
     # where a trace recorded the passes' 1-spp launch (its kernels exist), it is planned
     replayed = progressive.LaunchCost(cost.launches, spp_compiles=True, replays=frozenset([1]))
     assert replayed.cheapest() == 1 and replayed(1) < replayed(9) and replayed.fits(0.1) == 1

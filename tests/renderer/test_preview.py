@@ -9,7 +9,7 @@ import numpy as np
 from helpers import ball_scene_xml
 from mitsuba_mrt import MRTParams
 from mitsuba_mrt.recon.sampling import grid_pattern
-from mitsuba_mrt.renderer import auto
+from mitsuba_mrt.renderer import auto_limit
 from mitsuba_mrt.renderer.api import GridTracer
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP, pooled, preview_grid
 from mitsuba_mrt.renderer.progressive import LaunchCost
@@ -70,16 +70,16 @@ def test_a_sampler_that_bakes_its_spp_is_judged_by_the_spp_it_has_launched(varia
     scene = mi.load_string(ball_scene_xml(64, spp=16, sampler="stratified"))
     tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), 16, 0)
     pattern, key = grid_pattern(64, 64, 0.1), ("a test's key",)
-    probe = auto._grid_probe(pattern, tracer)
-    monkeypatch.setattr(auto, "_grid_probe", lambda *args: probe._replace(
+    probe = auto_limit._grid_probe(pattern, tracer)
+    monkeypatch.setattr(auto_limit, "_grid_probe", lambda *args: probe._replace(
         pass_s=0.2, host=0.0, recorded=False))
-    monkeypatch.setitem(auto._probe_recording_s, key, 0.0)
+    monkeypatch.setitem(auto_limit._probe_recording_s, key, 0.0)
     params = MRTParams(time_limit=1.0)
     for bakes in (True, False):
         cost = LaunchCost(spp_compiles=bakes)
         cost.add(16, 50.0, recorded=True)  # (its time holds its compilation)
-        monkeypatch.setitem(auto._launch_costs, key, cost)
-        outcome, _, _ = auto._preview_first(scene, pattern, tracer, params,
+        monkeypatch.setitem(auto_limit._launch_costs, key, cost)
+        outcome, _, _ = auto_limit.preview_first(scene, pattern, tracer, params,
                                             time.perf_counter(), key, [])
         # without baking, a pass is the probe's one sample: it fits
         assert (outcome is not None and outcome.plan.choice.mode == "fast") == bakes

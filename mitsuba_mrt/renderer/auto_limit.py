@@ -1,0 +1,465 @@
+"""``auto`` under a time limit: what fits, judged from what this process measured.
+
+Before the passes (:mod:`.progressive`) fill a time limit, ``auto`` asks
+whether something else fits it better: an MRT plan a default render of the
+scene kept (:func:`measured_within`), :data:`~.auto_plans.HOME` where the
+grid probe says it ends in time (:func:`mrt_within`), or a preview, where
+one pass and OIDN on every pixel would overrun the limit
+(:func:`preview_first`, :func:`filled_preview`).  What the process's
+earlier renders took (their first round, their last OIDN call, the passes'
+launches, the grid probe, a preview's stages after its grid) is kept here,
+per scene key, to plan the next one.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import NamedTuple
+
+from ..modes.plan import Candidate, Plan
+from ..recon.denoise import denoise_seconds, expected_seconds, preset
+from ..recon.sampling import SamplePattern
+from ..runtime.jit import kernel_seconds
+from ..runtime.recent import keep, note, typical
+from ..types import MRTParams, SeedStream, SparseTrace
+from . import kept_plans
+from .auto_plans import (EDGE_TESTED, HOME, HOME_MIN_SPP, AutoOutcome, Traced, edge_tested,
+                         find_surfaces, trace_id_pass, unmeasured_plan)
+from .preview import preview_grid
+from .progressive import LaunchCost
+from .replay import recordings
+from .scene_query import sampler_bakes_spp, textured_diffuse_shapes
+
+#: The share of a time limit the passes may plan to fill (the final OIDN
+#: call's time is planned within it; the rest is for the machine's noise and
+#: a fresh process's first uses: at 0.97 first renders took up to 1.16 times
+#: a quarter of a full render).
+TIME_MARGIN = 0.93
+
+#: The plan where one pass and OIDN on the whole image would overrun a time
+#: limit: the MRT's cheapest image, a tenth of the pixels' samples (its
+#: grid, one sample each, more where the limit leaves time) denoised and
+#: reconstructed.
+PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
+PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
+#: The preview where OIDN's call, even right after the grid's first launch,
+#: would end past :data:`PREVIEW_SLACK` times the limit: its grid as traced.
+UNDENOISED = Candidate("fast", "mrt", 1, mode="fast", denoise=False)
+UNDENOISED_NOTE = "OIDN would end past the time limit: the preview is not denoised"
+#: The note of a preview taken where a pass could be planned only at an spp
+#: traced before in the process (``{}``), as the sampler bakes its spp into
+#: its kernels: a pass of 1 spp would record kernels whose compilation, where
+#: Dr.Jit's disk cache lacks them, no probe tells.
+BAKED_NOTE = ("the sampler bakes its sample count into its kernels: a pass at 1 spp, never "
+              "launched in this process, might compile them for seconds, and the cheapest "
+              "launched, at {} spp, does not fit")
+#: How far one pass and OIDN may end past a time limit before the preview is
+#: taken instead: the preview's error is several times a pass's, and a limit
+#: is held to within 10 %.
+PREVIEW_SLACK = 1.1
+#: ... where the pass's time is the grid probe's guess rather than earlier
+#: passes' measure (the process's first passes of the scene): a fresh
+#: process's first pass took 1.15-1.5 times the guess (``two_sensors`` at
+#: 256 px), so the pass and OIDN must be expected to end within the limit
+#: itself.
+PROBED_SLACK = 1.0
+
+#: Under a time limit, what denoising textured diffuse surfaces as their
+#: shading (:attr:`.progressive.Passes.shading`) adds to a pass's last OIDN
+#: call, as a share of its expected time: finding the textured pixels and
+#: the division (on the gallery's textured scenes at 256 px, 2 cores, the
+#: shading call took 1.17 times a plain one, and finding the pixels 0.1-0.35
+#: times more, the most right after OIDN's or Dr.Jit's threads have run).
+SHADING_EXTRA = 0.5
+
+#: A pass of every pixel (1 spp, box filter, guides) over the preview's grid
+#: trace's kernel time scaled to as many pixels (that trace also follows
+#: each pixel's centre for its ids): 0.65-0.81 on the gallery at 256 px.
+PASS_OVER_GRID = 0.75
+
+#: Under a time limit, :data:`HOME`'s grid at the scene's spp is expected to
+#: take at most this many times the grid probe's kernel time (1 spp) per spp
+#: (the probe's share that does not grow with the spp, its ids and albedo,
+#: makes the measured ratio 0.42-0.74 on the gallery at 512 px).
+GRID_OVER_PROBE = 0.75
+#: ... and its id pass at most this many times the probe's kernel time, before
+#: it is traced (6-31 on the gallery at 512 px: it is traced, and its time
+#: counted, only where even this much would fit).
+ID_PASS_OVER_PROBE = 32.0
+#: ... and the stages after its traces (OIDN on the grid, the reconstruction)
+#: this many seconds a pixel (0.29-0.38 us warm on the gallery at 400-512 px).
+FINISH_PER_PIXEL = 0.45e-6
+#: The reason of :data:`HOME` taken under a time limit (``{}``: its kind's).
+WITHIN_REASON = "{}; within the time limit"
+
+#: Seconds from a time-limited render's start to the end of its first round
+#: of passes, per traced objects and pixel count, from the last such render
+#: in this process whose kernels were all replayed: what tells a limit too
+#: short for one pass and OIDN before a pass is traced.  A time that gives a
+#: preview is dropped: a preview traces no round, so one slow round would
+#: otherwise give previews for good.
+_first_round_s: dict = {}
+#: The seconds the last OIDN call of a time-limited render's passes took,
+#: per the same keys and whether it denoised textures as their shading,
+#: from the last such render: the next one leaves at least this for it after
+#: a first round (OIDN's expected time leaves out a filter made anew).
+_final_denoise_s: dict = {}
+#: The passes' launches (:class:`~.progressive.LaunchCost`), per traced
+#: objects and pixel count, of the last :data:`KEPT_COSTS` such keys: what
+#: the next render's passes plan from.
+_launch_costs: dict = {}
+KEPT_COSTS = 16
+#: What the grid probe took beyond its kernels when it recorded them, per
+#: the same keys (the last :data:`KEPT_COSTS`): about what the passes' first
+#: launch adds by recording theirs (both trace the integrator anew), which
+#: a replayed probe's time does not show.
+_probe_recording_s: dict = {}
+#: The grid probe's kernel run time per the same keys (the last
+#: :data:`KEPT_COSTS`), from its last replay: where it says :data:`HOME`
+#: cannot end within a time limit, the next render of the scene is not
+#: probed for it (:func:`mrt_within`).
+_probe_execute: dict = {}
+#: The seconds a preview's stages after its grid took (OIDN on the grid, the
+#: reconstruction, the finish), the last :data:`PREVIEW_AFTER_CALLS` per the
+#: same keys (the last :data:`KEPT_COSTS`): the next preview of the scene
+#: leaves their median for them (:func:`filled_preview`), where the first
+#: leaves :data:`FINISH_PER_PIXEL`'s bound, which holds a fresh process's
+#: first uses.
+_preview_after_s: dict = {}
+PREVIEW_AFTER_CALLS = 3
+#: The seconds per image pixel that the stages after a preview's grid took
+#: beyond OIDN (the reconstruction, the finish), the last
+#: :data:`PREVIEW_RATE_CALLS` previews in this process, of any scene, with
+#: OIDN or without: the first preview of a scene in a process that has made
+#: others leaves their largest for them, OIDN's expected time on top, where
+#: that is less than :data:`FINISH_PER_PIXEL`'s fresh-process bound.
+_preview_rate: list = []
+PREVIEW_RATE_CALLS = 8
+
+#: The reason of a plan :func:`measured_within` takes (``{}``: its kind's,
+#: then its spp and expected seconds).
+MEASURED_REASON = ("{}; at {} spp, {:.3g} s expected from this process's renders of "
+                   "the scene: within the time limit")
+
+
+def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
+                key: tuple, kept_key: tuple, notes: list, escape: bool = True
+                ) -> tuple[AutoOutcome | None, Traced, tuple | None, bool]:
+    """Under a time limit, OIDN installed: (the outcome of a plan other than
+    the passes where one fits the limit better, else None; what was traced
+    of every pixel; the passes' textured surfaces and whether they were
+    looked up, :func:`preview_first`).
+
+    Without a ``noise_threshold``, at least :data:`~.auto_plans.HOME_MIN_SPP`
+    spp and with ``escape``: an MRT plan a default render of ``kept_key``
+    kept (:func:`measured_within`), else :data:`~.auto_plans.HOME` where the
+    grid probe says it ends in time (:func:`mrt_within`).  Then the
+    preview (:func:`filled_preview`) where one pass and OIDN would overrun
+    the limit."""
+    traced, probed = Traced(), None
+    if escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP:
+        outcome = measured_within(kept_key, started, params.time_limit, notes,
+                                  sampler_bakes_spp(tracer.sensor.sampler()))
+        if outcome is not None:
+            return outcome, traced, None, False
+        outcome, traced, probed = mrt_within(scene, pattern, tracer, params, started, notes,
+                                             key)
+        if outcome is not None:
+            return outcome, traced, None, False
+    outcome, surfaces, found = preview_first(scene, pattern, tracer, params, started, key,
+                                             notes, probed, traced)
+    if outcome is not None:
+        note_baked(key, notes)
+        outcome = filled_preview(outcome, pattern, tracer, params, started, key)
+    return outcome, traced, surfaces, found
+
+
+def kept_cost(key: tuple, tracer) -> LaunchCost:
+    """The launches kept for ``key`` (new where there are none, of
+    ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
+    a 1-spp launch among its :attr:`~.progressive.LaunchCost.replays` where
+    another trace recorded its layout (a full render denoised, at 1 spp)."""
+    cost = _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
+        spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))
+    cost.replays = frozenset([1] if tracer.pass_recorded(1) else [])
+    return cost
+
+
+def note_first_round(key: tuple, seconds: float) -> None:
+    """Keep ``seconds``, from a time-limited render's start to the end of
+    its first round of passes, all its kernels replayed, for the next
+    render of ``key`` (:data:`_first_round_s`)."""
+    _first_round_s[key] = seconds
+
+
+def note_final_denoise(key: tuple, shading: bool, seconds: float) -> None:
+    """Keep what a time-limited render's last OIDN call took (``shading``:
+    textures denoised as their shading) for the next render of ``key``
+    (:data:`_final_denoise_s`)."""
+    _keep(_final_denoise_s, (key, shading), seconds)
+
+
+def _keep(table: dict, key: tuple, value):
+    """``value`` kept for ``key`` in ``table`` as its most recently used
+    entry, of the last :data:`KEPT_COSTS`; returned."""
+    return keep(table, key, value, KEPT_COSTS)
+
+
+def measured_within(key: tuple, started: float, limit: float, notes: list,
+                     bakes: bool) -> AutoOutcome | None:
+    """Under a time limit: the MRT plan of the default target that a render
+    of ``key`` (:func:`~.auto.scene_key` and :func:`~.auto.plan_key`) in this process kept
+    by its check, at the most spp expected to end within :data:`TIME_MARGIN`
+    of the limit (:func:`~.kept_plans.plan_within`; ``bakes``: the sampler
+    compiles kernels per spp), unchecked; else None."""
+    left = started + TIME_MARGIN * limit - time.perf_counter()
+    kept = kept_plans.plan_within(key, left, bakes)
+    if kept is None:
+        return None
+    choice, reason = kept
+    plan = Plan(choice, MEASURED_REASON.format(reason, choice.spp, choice.seconds),
+                time_limit=limit, notes=notes, pilot_s=time.perf_counter() - started)
+    return AutoOutcome(plan, kept_key=key)
+
+
+def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
+                notes: list, key: tuple) -> tuple[AutoOutcome | None, Traced, _Probe | None]:
+    """Under a time limit: (:data:`HOME`'s outcome where the scene's kind
+    points to it (:func:`unmeasured_plan`) and it is expected to end within
+    :data:`TIME_MARGIN` of the limit, else None; what it traced of every
+    pixel (:class:`Traced`); the grid probe where it was made).
+
+    The grid probe's kernel time tells the plan's traces (the grid at the
+    scene's spp: :data:`GRID_OVER_PROBE`; the id pass, traced only where
+    :data:`ID_PASS_OVER_PROBE` times it fits, then measured), the pixels
+    its other stages (:data:`FINISH_PER_PIXEL`), and a first trace of the
+    scene in this process what recording the grid's kernels adds.  A sampler
+    that compiles kernels per spp (:func:`~.scene_query.sampler_bakes_spp`)
+    is not planned so in such a process: its compilation cannot be told.
+    The plan's image is not checked (:func:`~.auto_plans.keeps`): the check's fallback,
+    the passes, would start after the limit.  Where the last replayed probe
+    of ``key`` (:data:`_probe_execute`) says the plan cannot end within the
+    limit, no probe is traced.
+    """
+    width, height = pattern.width, pattern.height
+    chosen = unmeasured_plan(scene, width * height)
+    if chosen is None or chosen[0] is not HOME:
+        return None, Traced(), None
+    end = started + TIME_MARGIN * params.time_limit
+
+    def rest(execute: float, host: float = 0.0) -> float:
+        """The plan's time after its id pass, from the probe's kernel run time."""
+        return GRID_OVER_PROBE * tracer.spp * execute + FINISH_PER_PIXEL * width * height + host
+
+    def ends_late(execute: float, host: float = 0.0) -> bool:
+        """Whether the plan, its id pass included, would end after ``end``."""
+        return time.perf_counter() + ID_PASS_OVER_PROBE * execute + rest(execute, host) > end
+
+    known = _probe_execute.get(key)
+    if known is not None and ends_late(known):
+        return None, Traced(), None
+    probed = _grid_probe(pattern, tracer)
+    if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
+        return None, Traced(), probed
+    if not probed.recorded:
+        _keep(_probe_execute, key, probed.execute)
+    host = probed.host if probed.recorded else 0.0
+    if ends_late(probed.execute, host):
+        return None, Traced(), probed
+    if chosen[1] in EDGE_TESTED:
+        traced, too_many = edge_tested(scene, tracer, params, width, height, notes)
+        if too_many:
+            return None, traced, probed
+    else:
+        traced = Traced(trace_id_pass(tracer, width, height))
+    if time.perf_counter() + rest(probed.execute, host) > end:
+        return None, traced, probed
+    plan = Plan(replace(chosen[0], spp=tracer.spp), WITHIN_REASON.format(chosen[1]),
+                time_limit=params.time_limit, notes=notes,
+                pilot_s=time.perf_counter() - started - traced.id_pass.seconds)
+    return AutoOutcome(plan, id_pass=traced.id_pass), traced, probed
+
+
+def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
+                   key: tuple, notes: list, probed: "_Probe | None" = None,
+                   traced: "Traced | None" = None
+                   ) -> tuple[AutoOutcome | None, tuple | None, bool]:
+    """Under a time limit: (the preview's outcome where one pass and OIDN on
+    the whole image would end after :data:`PREVIEW_SLACK` times the limit
+    (:data:`PROBED_SLACK` times, where a probe tells the pass's time),
+    else None; the passes' textured surfaces (:func:`find_surfaces`) and whether
+    they were looked up, which took time the question then counts).  Where
+    denoising the textured surfaces as their shading would end past the
+    limit itself (:data:`SHADING_EXTRA`) but plain OIDN would not, the
+    passes go without them (None, looked up).
+    ``probed``: the grid probe, where :func:`mrt_within` has made it;
+    ``traced``: what it traced of every pixel."""
+    width, height, limit = pattern.width, pattern.height, params.time_limit
+    preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
+    first_s = _first_round_s.get(key)
+    launches = kept_cost(key, tracer)
+    if first_s is None and launches.replayed:
+        # earlier passes measured a pass (a probe can record its kernels anew)
+        first_s = time.perf_counter() - started + launches(launches.cheapest())
+    textured = bool(textured_diffuse_shapes(scene).any())
+    if first_s is not None:
+        def late(shading: bool) -> bool:  # (the shading, which may go, within the limit)
+            slack = PROBED_SLACK if shading else PREVIEW_SLACK
+            return _preview_due(started + slack * limit, started + first_s,
+                                width * height, params.denoise_quality, shading, key)
+        if late(False):  # (the next render asks the launches' line or a probe)
+            _first_round_s.pop(key, None)
+            return AutoOutcome(preview), None, False
+        return None, None, textured and late(True)  # (then denoised plainly)
+    probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
+    end = started + PROBED_SLACK * limit
+    grid, pass_s = probed.grid, probed.pass_s
+    if launches.spp_compiles and launches.launches:
+        # a sampler that bakes its spp launches only spp launched before: the
+        # probe's sample scaled to the least of them (which counts the kernels'
+        # fixed part spp times), or the launches' line where it says less (a
+        # recorded launch may hold a compilation it could not tell apart)
+        spp = launches.cheapest()
+        pass_s = min(probed.host + spp * (probed.pass_s - probed.host), launches(spp))
+    pass_s += _passes_recording_s(key, probed)
+
+    def due(shading: bool) -> bool:
+        return _preview_due(end, time.perf_counter() + pass_s, width * height,
+                            params.denoise_quality, shading, key)
+    if due(False):
+        return AutoOutcome(preview, grid=grid), None, False
+    if textured and not due(True):
+        # the passes' textured pixels, then the same question with their time spent
+        surfaces = find_surfaces(scene, tracer, width, height,
+                             None if traced is None else traced.shape_index())
+        if not due(surfaces is not None):
+            return None, surfaces, True
+    # the passes, denoised plainly: the shading's extra time would end past the limit
+    return (AutoOutcome(preview, grid=grid) if due(False) else None), None, True
+
+
+def note_baked(key: tuple, notes: list) -> None:
+    """Say why the preview was taken (:data:`BAKED_NOTE`) where the passes'
+    launches for ``key`` (:data:`_launch_costs`) plan a pass only at an spp
+    above 1 that they traced before."""
+    launches = _launch_costs.get(key)
+    if launches is not None and launches.spp_compiles and launches.launches:
+        cheapest = launches.cheapest()
+        if cheapest > 1:
+            notes.append(BAKED_NOTE.format(cheapest))
+
+
+def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params: MRTParams,
+                    started: float, key: tuple) -> AutoOutcome:
+    """``outcome``, the preview, its grid pooled from as many 1-spp launches
+    as end before the limit (its :data:`TIME_MARGIN`) less what the stages
+    after the grid are expected to take (:func:`_preview_after`):
+    :func:`.preview.preview_grid`.  Where those stages would end past
+    :data:`PREVIEW_SLACK` times the limit even right after the grid's first
+    launch (a fresh process's first trace and OIDN call), the preview goes
+    without OIDN (:data:`UNDENOISED_NOTE`)."""
+    after = _preview_after(key, pattern, params.denoise_quality)
+    grid = preview_grid(outcome.grid, pattern, tracer,
+                        started + TIME_MARGIN * params.time_limit - after)
+    plan = outcome.plan
+    plan.choice = replace(plan.choice, spp=grid.spp)
+    outcome = replace(outcome, grid=grid, preview_key=key)
+    if time.perf_counter() + after > started + PREVIEW_SLACK * params.time_limit:
+        plan.choice = replace(plan.choice, name=UNDENOISED.name, denoise=False)
+        plan.notes.append(UNDENOISED_NOTE)
+    return outcome
+
+
+def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
+    """The seconds a preview's stages after its grid (OIDN on the grid, the
+    reconstruction, the finish) are expected to take: the median of the last
+    denoised previews' of ``key`` (:data:`_preview_after_s`); else
+    :data:`FINISH_PER_PIXEL`'s bound (before OIDN's first call at the
+    preview's quality, that call's expected time on top, which holds its
+    set-up), or where less, the largest time per pixel beyond OIDN of this
+    process's last previews (:data:`_preview_rate`) and OIDN's expected
+    time."""
+    kept = _preview_after_s.get(key)
+    if kept:
+        return typical(kept)
+    quality = preset(quality)
+    pixels, oidn = pattern.width * pattern.height, expected_seconds(pattern.count, quality)
+    first_call = denoise_seconds(pattern.count, quality) is None
+    bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)
+    return min(bound, max(_preview_rate) * pixels + oidn) if _preview_rate else bound
+
+
+def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int) -> None:
+    """Keep what the stages after a preview's grid took (``seconds``, of
+    which OIDN ``denoise``; 0 without OIDN) on an image of ``pixels``: for
+    the next preview of ``key`` where it was denoised
+    (:data:`_preview_after_s`), and as a time per pixel beyond OIDN for
+    the first preview of another scene (:data:`_preview_rate`)."""
+    if denoise > 0.0:
+        note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
+             PREVIEW_AFTER_CALLS)
+    note(_preview_rate, max(seconds - denoise, 0.0) / pixels, PREVIEW_RATE_CALLS)
+
+
+def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
+    """What the passes' first launch for ``key`` is expected to add to the
+    pass ``probed`` predicts by recording its kernels: 0 where the passes have
+    launched for ``key`` before or another trace recorded their 1-spp launch
+    (they replay) or the probe itself recorded
+    (its time holds a recording); else what the probe's recording took
+    beyond its replays (:data:`_probe_recording_s`), kept from the render
+    whose probe recorded, less what compiling kernels took of it: a kernel
+    compiled once is on disk for every later process, so a compilation kept
+    would hold every later render of the process to previews."""
+    if probed.recorded:
+        _keep(_probe_recording_s, key, probed.host - probed.compile)
+        return 0.0
+    launches = _launch_costs.get(key)
+    if launches is not None and (launches.launches or 1 in launches.replays):
+        return 0.0
+    return max(_probe_recording_s.get(key, 0.0) - probed.host, 0.0)
+
+
+class _Probe(NamedTuple):
+    """The grid probe (:func:`_grid_probe`): the preview's grid trace, the
+    seconds a pass over every pixel is expected to take, the trace's kernels'
+    run time, what it took beyond them, whether it recorded its kernels (a
+    process's first trace of the scene) and what compiling those not in
+    Dr.Jit's caches took of ``host`` (once per machine, not per process)."""
+
+    grid: SparseTrace
+    pass_s: float
+    execute: float
+    host: float
+    recorded: bool
+    compile: float = 0.0
+
+
+def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
+    """The preview's grid trace (:data:`PREVIEW`'s spp), and the seconds a
+    pass over every pixel is expected to take: the trace's kernels' run
+    time scaled to every pixel, times :data:`PASS_OVER_GRID`, plus what the
+    trace took beyond its kernels (launching them, reading them back, and
+    in a fresh process the first use of the scene and the kernels)."""
+    begin, recorded = time.perf_counter(), recordings()
+    with kernel_seconds() as spent:
+        grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
+                                                replay=True)
+    host = max(time.perf_counter() - begin - spent.execute, 0.0)
+    pixels = pattern.width * pattern.height
+    return _Probe(grid, host + PASS_OVER_GRID * spent.execute * pixels / pattern.count,
+                  spent.execute, host, recordings() > recorded, min(spent.compile, host))
+
+
+def _preview_due(end: float, first_end: float, pixels: int, quality: str,
+                 shading: bool = False, key: tuple | None = None) -> bool:
+    """Whether OIDN on ``pixels`` after a first round ending at
+    ``first_end`` would end after ``end`` (both ``time.perf_counter()``
+    values); with ``shading``, textured surfaces denoised as their shading
+    (:data:`SHADING_EXTRA`); at least what the last such call for ``key``
+    took (:data:`_final_denoise_s`)."""
+    oidn = expected_seconds(pixels, preset(quality)) * (1.0 + (SHADING_EXTRA if shading
+                                                               else 0.0))
+    oidn = max(oidn, _final_denoise_s.get((key, shading), 0.0))
+    return first_end + oidn > end

@@ -1,0 +1,258 @@
+"""``auto``'s outcome, and the MRT plans a scene's kind points to.
+
+Under the default target, without a pilot, :func:`unmeasured_plan` reads
+the scene's kind (its lights, surfaces and the image's size) and points to
+:data:`HOME` (mode ``idpass``, its grid denoised) or :data:`SKY` (mode
+``refine``, its grid denoised), or to neither (the passes);
+:func:`mrt_by_kind` makes that plan, its image to be checked
+(:func:`keeps`).  :class:`AutoOutcome` is what every path of
+:func:`~.auto.run_auto` returns.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import mitsuba as mi
+import numpy as np
+
+from ..modes.plan import Candidate, Plan
+from ..recon.ids import edge_share
+from ..recon.sampling import every_pixel
+from ..types import MRTParams, SeedStream, SparseTrace
+from .held_out import HeldOut
+from .progressive import Progress
+from .scene_query import (environment_map, has_mirrors, lit_diffuse_by_points,
+                          textured_diffuse_shapes, transmits)
+from .trace import trace_shapes
+
+#: The plan, under the default target, where every surface is diffuse and
+#: every light a point, spot or directional one
+#: (:func:`~.scene_query.lit_diffuse_by_points`, the report's own scenes):
+#: mode ``idpass`` at the scene's spp, OIDN on its grid.  There its ids hold
+#: every edge of shape and shadow and its error meets a full render's noise
+#: for less than the denoised passes take (``bench rival``'s Fig. 1 row).
+HOME = Candidate("idpass+oidn", "mrt", 0, mode="idpass", denoise=True)
+HOME_REASON = "diffuse surfaces lit by point lights alone: the MRT's id pass, denoised grid"
+#: The fewest spp for :data:`HOME`: below them the id pass costs too large a
+#: share of the render, and the passes' few rounds cost little.
+HOME_MIN_SPP = 16
+#: :data:`HOME` on other scenes, under the same conditions: images of at least
+#: this many pixels (512 x 512) lit by no environment map
+#: (:func:`~.scene_query.environment_map`).  There the grid resolves the
+#: shading the ids do not hold, and the id pass's albedo the textures that
+#: OIDN blurs; on smaller images the grid's spacing is coarse beside the
+#: scene's detail (``bench rival`` at 256 px: ``idpass+oidn`` behind the
+#: alternative on five of nine gallery scenes).
+WIDE_PIXELS = 1 << 18
+WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, denoised grid"
+#: :data:`HOME` on a smaller image where a diffuse surface is textured
+#: (:func:`~.scene_query.textured_diffuse_shapes`) and no surface transmits
+#: light (:func:`~.scene_query.transmits`): the id pass gives the texture at
+#: every pixel and the grid only the shading beneath it, which is smooth.
+#: Through glass the ids see one shape where an image of the scene lies
+#: (``room`` at 256 px: the check rejects ``idpass+oidn``, then the passes).
+TEXTURED_REASON = ("textured diffuse surfaces, nothing transmits light: the MRT's id pass "
+                   "gives the texture, denoised grid")
+#: The reasons whose plan gives way to the passes where too many of the
+#: image's pixels lie at an edge between ids (:func:`edge_tested`).
+EDGE_TESTED = (WIDE_REASON, TEXTURED_REASON)
+#: :data:`HOME` on such an image is traced only where at most this share of
+#: its pixels lie at an edge between shapes, then between ids
+#: (:func:`~mitsuba_mrt.recon.ids.edge_share` of the id pass, which
+#: ``idpass`` then reuses): where more do, the regions are small beside the
+#: grid's spacing and hold few of its samples each (``bench rival`` at 512
+#: px: ``instanced``, 5.5 %, is the one gallery scene where ``idpass+oidn``
+#: is no better than the passes; the others have 1.1-3.6 %).
+WIDE_EDGE_SHARE = 0.045
+#: The plan, under the same conditions, where an environment map lights the
+#: scene: mode ``refine``, OIDN on its grid.  Light from every direction
+#: shades the inside of a shape slowly, which the grid holds; where it does
+#: not, at the shapes' edges and their reflections of the map, ``refine``
+#: traces the pixels (``bench rival``: 0.76-0.91x the alternative's error
+#: on the gallery's two such scenes at 256 and 512 px, where ``idpass+oidn``
+#: is 1.07-1.72x and the passes about 1.0x).
+SKY = Candidate("refine+oidn", "mrt", 0, mode="refine", denoise=True)
+SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid"
+#: :data:`SKY` on a smaller image without an environment map where a surface
+#: mirrors or transmits light (:func:`~.scene_query.has_mirrors`,
+#: :func:`~.scene_query.transmits`) and none is a textured diffuse one: what
+#: they show is an image of the scene that no id tells apart, which ``refine``
+#: traces at its edges, and without textures the passes cannot denoise the
+#: shading alone, so they need most of the scene's spp to meet a full
+#: render's noise (``bench rival`` at 256 px: ``cornell``, the passes at
+#: 0.6 of a full render's time; with textures, ``room``, they meet it at 0.2).
+SPECULAR_REASON = "mirrors or glass, no texture: the MRT's refined edges, denoised grid"
+#: :data:`HOME`'s and :data:`SKY`'s image is kept where its held-out check estimates its RMS
+#: error at most this many times a full render's noise (the default target);
+#: else the passes render the image.  The RMS error weighs the MRT's few
+#: pixels at edges more than the report's mean absolute error does: on the
+#: bench's scenes where that image meets the target by the report's metric,
+#: the check's estimate is 0.5-1.3 times the noise.
+CHECK_SLACK = 1.5
+#: :data:`SKY`'s plans, and :data:`HOME`'s on scenes other than the report's
+#: kind, on images of fewer than :data:`WIDE_PIXELS`: the grid spreads the
+#: same samples over this many times the pixels (``sample_fraction``), at
+#: that share of the spp.  There the default grid's spacing is coarse beside
+#: the scene's detail, and ``refine`` traces its edges' pixels at the grid's
+#: spp (``examples/grid_spread.py``).
+SMALL_IMAGE_SPREAD = 2
+
+
+@dataclass
+class AutoOutcome:
+    """``auto``'s plan, and the image when the passes made it (``grid``: the
+    preview's grid, where tracing it told the plan; ``check``: the plan's
+    MRT image is to be checked, :func:`keeps`; ``id_pass``: the image's id
+    pass, where the plan traced it; ``preview_key``: a preview's key, under
+    which :func:`~.auto_limit.note_preview_after` keeps what its later stages take;
+    ``kept_key``: a kept plan's key (:mod:`.kept_plans`), under which
+    :func:`~.kept_plans.note_render` keeps what its render took)."""
+
+    plan: Plan
+    image: np.ndarray | None = None
+    alpha: np.ndarray | None = None
+    progress: Progress | None = None
+    grid: SparseTrace | None = None
+    check: bool = False
+    id_pass: SparseTrace | None = None
+    preview_key: tuple | None = None
+    kept_key: tuple | None = None
+
+
+def keeps(held: HeldOut) -> bool:
+    """Whether an MRT image chosen without a pilot (:data:`HOME`, :data:`SKY`)
+    whose check found ``held`` is kept.
+
+    Examples
+    --------
+    >>> keeps(HeldOut(error=0.012, full_error=0.01, pixels=2048, seconds=0.01))
+    True
+    >>> keeps(HeldOut(error=0.02, full_error=0.01, pixels=2048, seconds=0.01))
+    False
+    """
+    return held.error <= CHECK_SLACK * held.full_error
+
+
+def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | None:
+    """The MRT plan the scene's kind and ``pixels`` point to (:data:`HOME`,
+    :data:`SKY`), with its reason, or None: the passes."""
+    if lit_diffuse_by_points(scene):
+        return HOME, HOME_REASON
+    if environment_map(scene):
+        return SKY, SKY_REASON
+    if pixels >= WIDE_PIXELS:
+        return HOME, WIDE_REASON
+    textured = textured_diffuse_shapes(scene).any()
+    if textured and not transmits(scene):
+        return HOME, TEXTURED_REASON
+    if not textured and (has_mirrors(scene) or transmits(scene)):
+        return SKY, SPECULAR_REASON
+    return None
+
+
+def mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, notes: list,
+                 probe_start: float) -> tuple[AutoOutcome | None, Traced]:
+    """(the outcome of :func:`unmeasured_plan`'s MRT plan, its image to be
+    checked, or None: the passes; what the plan traced of every pixel).  A
+    large or textured image's plan (:data:`EDGE_TESTED`) gives way to the
+    passes, with a note, where too many of its pixels lie at an edge between
+    ids (:func:`edge_tested`)."""
+    chosen = unmeasured_plan(scene, width * height)
+    if chosen is None:
+        return None, Traced()
+    traced = Traced()
+    if chosen[1] in EDGE_TESTED:
+        traced, too_many = edge_tested(scene, tracer, params, width, height, notes)
+        if too_many:
+            return None, traced
+    id_pass = traced.id_pass  # (a trace of the image: not the plan's time)
+    pilot_s = time.perf_counter() - probe_start - (0.0 if id_pass is None else id_pass.seconds)
+    choice = spread(chosen[0], chosen[1], tracer.spp, params.sample_fraction, width * height)
+    return AutoOutcome(Plan(choice, chosen[1], pilot_s=pilot_s, notes=notes), check=True,
+                       id_pass=id_pass), traced
+
+
+def spread(chosen: Candidate, reason: str, spp: int, fraction: float,
+           pixels: int) -> Candidate:
+    """``chosen``, an MRT plan of :func:`unmeasured_plan` for ``reason``, at
+    the render's ``spp`` and grid ``fraction``; on an image of fewer than
+    :data:`WIDE_PIXELS` ``pixels`` of another kind than the report's, its
+    grid :data:`SMALL_IMAGE_SPREAD` times denser at as many times fewer spp.
+
+    Examples
+    --------
+    >>> spread(SKY, SKY_REASON, 64, 0.1, 256 * 256).label
+    'refine+oidn @ 32 spp, grid of 20 % of the pixels'
+    >>> spread(HOME, HOME_REASON, 64, 0.1, 256 * 256).label
+    'idpass+oidn @ 64 spp'
+    """
+    if pixels >= WIDE_PIXELS or reason == HOME_REASON:
+        return replace(chosen, spp=spp)
+    return replace(chosen, spp=max(1, math.ceil(spp / SMALL_IMAGE_SPREAD)),
+                   fraction=min(1.0, SMALL_IMAGE_SPREAD * fraction))
+
+
+def edge_tested(scene, tracer, params: MRTParams, width: int, height: int,
+                 notes: list) -> tuple[Traced, bool]:
+    """(the pixels traced, whether more than :data:`WIDE_EDGE_SHARE` of them
+    lie at an edge between ids: too many for :data:`EDGE_TESTED`'s plans).
+
+    Each pixel's ids are traced first, without the albedo (one ray a pixel
+    and its lights' shadow rays: a tenth of the id pass's cost), and the id
+    pass only where few enough pixels lie at an edge between them.
+    """
+    xy = every_pixel(width, height)
+    ids_alone = tracer(xy, stream=SeedStream.ID_PASS, radiance=False, albedo=False,
+                       replay=True)
+    if _too_many_edges(ids_alone.ids(params.rule_for("idpass")), width, height, notes):
+        return Traced(shapes=ids_alone.shape_index), True
+    return Traced(trace_id_pass(tracer, width, height), ids_alone.shape_index), False
+
+
+def _too_many_edges(ids: np.ndarray, width: int, height: int, notes: list) -> bool:
+    """Whether more than :data:`WIDE_EDGE_SHARE` of the pixels lie at an edge
+    between ``ids`` (the pixels'; a note says so where they do)."""
+    share = edge_share(ids.reshape(height, width))
+    if share > WIDE_EDGE_SHARE:
+        notes.append(f"{share:.1%} of the pixels at an edge between ids: "
+                     f"too many for the MRT's grid")
+    return share > WIDE_EDGE_SHARE
+
+
+def find_surfaces(scene, tracer, width: int, height: int,
+              shape_index: np.ndarray | None = None) -> tuple | None:
+    """(each pixel's shape index, :func:`textured_diffuse_shapes`) where the
+    scene has a textured diffuse surface, else None: the shape of every
+    pixel's centre ray (``shape_index`` where given, else
+    :func:`~.trace.trace_shapes`), for the passes to find the textured pixels."""
+    textured = textured_diffuse_shapes(scene)
+    if not textured.any():
+        return None
+    if shape_index is not None:
+        return shape_index, textured
+    return trace_shapes(scene, tracer.sensor, every_pixel(width, height), replay=True), textured
+
+
+class Traced(NamedTuple):
+    """What planning traced of every pixel: the id pass (:func:`trace_id_pass`)
+    and each pixel's shape (the centre ray's, from the ids :func:`edge_tested`
+    traced), None where not."""
+
+    id_pass: SparseTrace | None = None
+    shapes: np.ndarray | None = None
+
+    def shape_index(self) -> np.ndarray | None:
+        """Each pixel's shape index, where either trace gives it, else None."""
+        if self.shapes is not None:
+            return self.shapes
+        return None if self.id_pass is None else self.id_pass.shape_index
+
+
+def trace_id_pass(tracer, width: int, height: int) -> SparseTrace:
+    """The image's id pass, as mode ``idpass`` traces it (and then reuses)."""
+    return tracer(every_pixel(width, height), stream=SeedStream.ID_PASS, radiance=False,
+                  replay=True)
