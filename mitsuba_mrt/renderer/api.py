@@ -204,52 +204,60 @@ def _note_overrun(result: MRTResult) -> None:
 
 def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             param_overrides) -> MRTResult:
-    """:func:`render`'s work, its arguments as given."""
+    """:func:`render`'s work, its arguments as given: checked, then mode
+    ``auto``'s plan and the image it names (:func:`_auto`), or the MRT's
+    pipeline in the mode asked for (:func:`_mrt`)."""
     start, recorded = time.perf_counter(), recordings()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
     check_controls(mode, params)
     sensor = resolve_sensor(scene, sensor)
-    spp = _spp_of(spp, sensor)
-    width, height = (int(v) for v in sensor.film().crop_size())
-    tracer = GridTracer(scene, sensor, wrapper.nested, spp, check_seed(seed))
-    plan, pattern, grid, check, id_pass, preview_key = None, None, None, False, None, None
-    kept_key = None
+    tracer = GridTracer(scene, sensor, wrapper.nested, _spp_of(spp, sensor), check_seed(seed))
     if mode == "auto":
-        plan = auto.plan_without_pilot(width, height, spp, is_jit(), params)
-        if plan is None:
-            pattern = grid_pattern(width, height, params.sample_fraction)
-            outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
-            plan, grid, check = outcome.plan, outcome.grid, outcome.check
-            id_pass, preview_key = outcome.id_pass, outcome.preview_key
-            kept_key = outcome.kept_key
-            if outcome.image is not None:
-                return _passes_result(outcome, tracer, params, start)
-        choice = plan.choice
-        if choice.kind == "full":
-            image, alpha, seconds = _full_render(scene, wrapper.nested, sensor, choice.spp, seed)
-            return _whole_image_result(image, alpha, params, choice.spp, plan,
-                                       Timings(check=plan.pilot_s, full_render=seconds), start)
-        if choice.fraction is not None:  # (the plan chose its grid)
-            pattern = grid_pattern(width, height, choice.fraction)
-        if check:  # an MRT image chosen without a pilot: kept if its check says so
-            result = _mrt(pattern, replace(tracer, spp=choice.spp, id_pass=id_pass),
-                          params.with_(denoise="oidn" if choice.denoise else "none"),
-                          choice.mode, plan, start, progress or _quiet, grid)
-            return _checked(result, scene, pattern, tracer, params, start, progress)
-        mode = choice.mode
-        params = params.with_(denoise="oidn" if choice.denoise else "none")
-        tracer = replace(tracer, spp=choice.spp, id_pass=id_pass)
-    if pattern is None:  # (a plan's pilot has made it already)
+        return _auto(tracer, params, start, recorded, progress)
+    width, height = (int(v) for v in sensor.film().crop_size())
+    return _mrt(grid_pattern(width, height, params.sample_fraction), tracer, params, mode,
+                None, start, progress or _quiet)
+
+
+def _auto(tracer: GridTracer, params: MRTParams, start: float, recorded: int,
+          progress) -> MRTResult:
+    """Mode ``auto``: its plan (:mod:`.auto`), then the image the plan names:
+    the passes' own, a full render (``mi.render``'s), or the MRT's in the
+    plan's mode (checked, :func:`_checked`, where chosen without a pilot);
+    what it took kept for the next such plan (``recorded``: the kernel
+    recordings when the render began)."""
+    scene, sensor = tracer.scene, tracer.sensor
+    width, height = (int(v) for v in sensor.film().crop_size())
+    plan = auto.plan_without_pilot(width, height, tracer.spp, is_jit(), params)
+    pattern = None
+    if plan is None:
         pattern = grid_pattern(width, height, params.sample_fraction)
+        outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
+        if outcome.image is not None:
+            return _passes_result(outcome, tracer, params, start)
+    else:
+        outcome = auto_plans.AutoOutcome(plan)
+    plan, choice = outcome.plan, outcome.plan.choice
+    if choice.kind == "full":
+        image, alpha, seconds = _full_render(scene, tracer.integrator, sensor, choice.spp,
+                                             tracer.seed)
+        return _whole_image_result(image, alpha, params, choice.spp, plan,
+                                   Timings(check=plan.pilot_s, full_render=seconds), start)
+    if choice.fraction is not None:  # (the plan chose its grid)
+        pattern = grid_pattern(width, height, choice.fraction)
+    planned = replace(tracer, spp=choice.spp, id_pass=outcome.id_pass)
     begin = time.perf_counter()
-    result = _mrt(pattern, tracer, params, mode, plan, start, progress or _quiet, grid)
-    if preview_key is not None:  # (its grid was traced: the rest, for the next preview)
-        auto_limit.note_preview_after(preview_key, time.perf_counter() - begin,
+    result = _mrt(pattern, planned, params.with_(denoise="oidn" if choice.denoise else "none"),
+                  choice.mode, plan, start, progress or _quiet, outcome.grid)
+    if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
+        return _checked(result, scene, pattern, tracer, params, start, progress)
+    if outcome.preview_key is not None:  # (its grid was traced: the rest, for the next preview)
+        auto_limit.note_preview_after(outcome.preview_key, time.perf_counter() - begin,
                                       result.timings.denoise, width * height)
-    if kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
-        kept_plans.note_render(kept_key, tracer.spp, result.timings.total,
+    if outcome.kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
+        kept_plans.note_render(outcome.kept_key, planned.spp, result.timings.total,
                                recordings() == recorded)
     return result
 
@@ -257,7 +265,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
              params: MRTParams, start: float, progress) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
-    check keeps it (:func:`.auto.keeps`; then :mod:`.kept_plans` keeps what
+    check keeps it (:func:`.auto_plans.keeps`; then :mod:`.kept_plans` keeps what
     it took); else ``auto``'s denoised passes, the MRT's seconds and the
     check's counted as ``check``."""
     held = check_image(result.image, result.traced_mask, tracer,
