@@ -27,7 +27,7 @@ from . import kept_plans
 from .auto_plans import (EDGE_TESTED, HOME, HOME_MIN_SPP, AutoOutcome, Traced, edge_tested,
                          find_surfaces, trace_id_pass, unmeasured_plan)
 from .preview import preview_grid
-from .progressive import LaunchCost
+from .launch_cost import LaunchCost
 from .replay import recordings
 from .scene_query import sampler_bakes_spp, textured_diffuse_shapes
 
@@ -105,7 +105,7 @@ _first_round_s: dict = {}
 #: from the last such render: the next one leaves at least this for it after
 #: a first round (OIDN's expected time leaves out a filter made anew).
 _final_denoise_s: dict = {}
-#: The passes' launches (:class:`~.progressive.LaunchCost`), per traced
+#: The passes' launches (:class:`~.launch_cost.LaunchCost`), per traced
 #: objects and pixel count, of the last :data:`KEPT_COSTS` such keys: what
 #: the next render's passes plan from.
 _launch_costs: dict = {}
@@ -178,7 +178,7 @@ def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
 def kept_cost(key: tuple, tracer) -> LaunchCost:
     """The launches kept for ``key`` (new where there are none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
-    a 1-spp launch among its :attr:`~.progressive.LaunchCost.replays` where
+    a 1-spp launch among its :attr:`~.launch_cost.LaunchCost.replays` where
     another trace recorded its layout (a full render denoised, at 1 spp)."""
     cost = _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
         spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))

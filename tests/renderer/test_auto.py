@@ -16,7 +16,7 @@ import mitsuba_mrt
 from mitsuba_mrt import MRTError, MRTParams
 from mitsuba_mrt.modes.plan import Candidate, Plan, choose
 from mitsuba_mrt.recon.denoise import release
-from mitsuba_mrt.renderer import auto, auto_limit, auto_plans, kept_plans, pilot
+from mitsuba_mrt.renderer import auto, auto_limit, auto_plans, kept_plans, launch_cost, pilot
 from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
 from mitsuba_mrt.types import Timings
@@ -948,13 +948,13 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(timed_trac
     xy = np.zeros((4, 2), dtype=np.int64)
     passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
     passes.add(Tracer(2)(xy), None if halves else 0, True)
-    cost = progressive.LaunchCost([(1, 2.0, False), (2, 3.0, False)])  # the line 1 + spp
+    cost = launch_cost.LaunchCost([(1, 2.0, False), (2, 3.0, False)])  # the line 1 + spp
     start = clock[0]
     progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
                       max_spp=64, launch=1, halves=halves, least=2 if halves else 1)
     # 13 s left, a launch at most 1 / 1.15 of what is left (the safety): 10 spp
     # (11 s), then none (2 s left, 1.74 s with the safety)
-    assert progressive.ROUND_SAFETY == 1.15
+    assert launch_cost.ROUND_SAFETY == 1.15
     assert launched[1:] == [10] and clock[0] <= start + 13.0
     assert passes.count == 2 + sum(launched[1:]) and progress.spp == passes.count
     assert [launch[:3] for launch in cost.launches[2:]] == [(s, 1.0 + s, False)
@@ -982,7 +982,7 @@ def test_a_time_limit_s_first_launch_is_sized_by_earlier_renders_launches(timed_
     from mitsuba_mrt.renderer import progressive
 
     Tracer, launched, clock = timed_tracer
-    cost = progressive.LaunchCost()
+    cost = launch_cost.LaunchCost()
     for _ in range(2):  # two renders of the same scene, one cost kept between them
         launched.clear()
         clock[0] = 0.0
@@ -997,9 +997,8 @@ def test_a_time_limit_s_first_launch_is_sized_by_earlier_renders_launches(timed_
 @pytest.mark.parametrize("spp_compiles", [False, True])
 def test_a_first_launch_s_compilation_is_a_new_spp_s_cost_only_where_the_sampler_bakes_spp(
         spp_compiles):
-    from mitsuba_mrt.renderer import progressive
 
-    cost = progressive.LaunchCost(spp_compiles=spp_compiles)
+    cost = launch_cost.LaunchCost(spp_compiles=spp_compiles)
     # a process's first launch compiled its kernels (0.4 s of its 0.6 s), the next replayed
     cost.add(8, 0.6, recorded=True, compile_s=0.4)
     cost.add(8, 0.16)
@@ -1017,9 +1016,8 @@ def test_a_first_launch_s_compilation_is_a_new_spp_s_cost_only_where_the_sampler
 
 
 def test_a_first_launch_s_recording_is_a_new_spp_s_cost_only_until_another_records():
-    from mitsuba_mrt.renderer import progressive
 
-    cost = progressive.LaunchCost(spp_compiles=False)
+    cost = launch_cost.LaunchCost(spp_compiles=False)
     # a process's first launch recorded, and paid for first uses too; the next replayed
     cost.add(1, 0.05, recorded=True)  # (the cost's first)
     assert cost.launches[0].first
@@ -1030,12 +1028,11 @@ def test_a_first_launch_s_recording_is_a_new_spp_s_cost_only_until_another_recor
 
 
 def test_a_recorded_launch_s_replay_time_is_on_the_line():
-    from mitsuba_mrt.renderer import progressive
-    from mitsuba_mrt.renderer.progressive import Launch
+    from mitsuba_mrt.renderer.launch_cost import Launch
 
     # a time-limited render's launches (materials at 512 px): the replays were of 1 and 2
     # spp, the larger launches recorded a new spp each (recording measured)
-    cost = progressive.LaunchCost([
+    cost = launch_cost.LaunchCost([
         Launch(1, 0.228, True, first=True, recording=0.016), Launch(1, 0.060),
         Launch(6, 0.205, True, recording=0.016), Launch(2, 0.075),
         Launch(14, 0.429, True, recording=0.016), Launch(4, 0.114, True, recording=0.008),
@@ -1048,11 +1045,10 @@ def test_a_recorded_launch_s_replay_time_is_on_the_line():
 
 
 def test_a_launch_s_kernels_run_time_and_the_cost_s_first_launch_are_kept(scene, monkeypatch):
-    from mitsuba_mrt.renderer import progressive
 
     from mitsuba_mrt.renderer.replay import clear_recordings
 
-    kept = progressive.LaunchCost(spp_compiles=False)
+    kept = launch_cost.LaunchCost(spp_compiles=False)
     monkeypatch.setattr(auto, "kept_cost", lambda key, tracer: kept)
     clear_recordings()  # (the first launch records its replay, and measures that)
     mitsuba_mrt.render(scene, time_limit=10.0)
@@ -1086,7 +1082,7 @@ def test_a_launch_s_cost_leaves_out_its_companion(timed_tracer):
 
     Tracer, launched, clock = timed_tracer
     xy = np.arange(8, dtype=np.int64).reshape(4, 2)
-    passes, cost = progressive.Passes(np.arange(4)), progressive.LaunchCost()
+    passes, cost = progressive.Passes(np.arange(4)), launch_cost.LaunchCost()
     passes.companion = np.array([0, 2])
     seconds = progressive._launch(passes, Tracer(2), xy, 2, 0, None, cost)
     # one launch of the 4 pixels and, after them, the companion's 2
@@ -1112,7 +1108,7 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     kinds = []
     # earlier renders launched 9, 4 and 36 spp (the line 1 s + 1 s an spp); a new
     # spp would compile its kernels
-    cost = progressive.LaunchCost([(9, 10.0, False), (4, 5.0, False), (36, 37.0, True)],
+    cost = launch_cost.LaunchCost([(9, 10.0, False), (4, 5.0, False), (36, 37.0, True)],
                                   spp_compiles=True)
     progressive.run_passes(Stratified(), 2, 2, quality="fast", target_error=None,
                            deadline=30.0, max_spp=64, full_spp=16, area=1.0, denoise=False,
@@ -1128,7 +1124,7 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     clock[0] = 0.0
     progressive.run_passes(Stratified(), 2, 2, quality="fast", target_error=None,
                            deadline=10.0, max_spp=64, full_spp=16, area=1.0, denoise=False,
-                           cost=progressive.LaunchCost([(1, 2.0, False)], spp_compiles=True))
+                           cost=launch_cost.LaunchCost([(1, 2.0, False)], spp_compiles=True))
     assert launched == [1, 1, 1, 1] and clock[0] <= 10.0
 
 
@@ -1148,7 +1144,7 @@ def test_passes_that_estimate_nothing_ask_their_traces_for_no_variance(timed_tra
     common = dict(quality="fast", max_spp=8, full_spp=8, area=1.0, denoise=False)
     progressive.run_passes(Spy(), 2, 2, target_error=None, deadline=None, fixed=True, **common)
     progressive.run_passes(Spy(), 2, 2, target_error=None, deadline=clock[0] + 20.0,
-                           cost=progressive.LaunchCost([(1, 2.0, False), (2, 3.0, False)]),
+                           cost=launch_cost.LaunchCost([(1, 2.0, False), (2, 3.0, False)]),
                            **common)
     assert asked and not any(asked)
     asked.clear()
@@ -1305,7 +1301,6 @@ def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
 
 
 def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypatch):
-    from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.renderer.api import GridTracer
 
     monkeypatch.setattr(auto_limit, "_launch_costs", {})
@@ -1313,7 +1308,7 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
     scene = mi.load_string(scene_xml(64, spp=16, sampler="stratified"))
     assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
     (key,) = auto_limit._launch_costs  # passes launched only at 9 spp before, as a kept plan's
-    cost = auto_limit._launch_costs[key] = progressive.LaunchCost([(9, 0.2, False)],
+    cost = auto_limit._launch_costs[key] = launch_cost.LaunchCost([(9, 0.2, False)],
                                                             spp_compiles=True)
     assert cost(1) == math.inf and cost.cheapest() == 9
     auto_limit._first_round_s.clear()
@@ -1323,7 +1318,7 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
     assert preview.auto.reason == auto_limit.PREVIEW_REASON
     assert auto_limit.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes
     # where a trace recorded the passes' 1-spp launch (its kernels exist), it is planned
-    replayed = progressive.LaunchCost(cost.launches, spp_compiles=True, replays=frozenset([1]))
+    replayed = launch_cost.LaunchCost(cost.launches, spp_compiles=True, replays=frozenset([1]))
     assert replayed.cheapest() == 1 and replayed(1) < replayed(9) and replayed.fits(0.1) == 1
     # an independent sampler plans a pass of any spp: no such note
     plain = mitsuba_mrt.render(mi.load_string(scene_xml(64, spp=16)), time_limit=1e-6)

@@ -12,7 +12,7 @@ from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer import auto_limit
 from mitsuba_mrt.renderer.api import GridTracer
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP, pooled, preview_grid
-from mitsuba_mrt.renderer.progressive import LaunchCost
+from mitsuba_mrt.renderer.launch_cost import LaunchCost
 from mitsuba_mrt.types import SeedStream, SparseTrace
 
 

@@ -1,0 +1,243 @@
+"""What a launch of passes costs, learnt from the launches so far.
+
+:class:`LaunchCost` fits a line, a fixed part and one per spp, through
+the launches :mod:`.progressive` has made (of this render and earlier
+renders of the same scene and image size), and tells how many spp a
+launch may have to end in the time left, where a launch of a new spp
+records its kernels' replay anew (:mod:`.replay`) or compiles them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+#: A launch is planned to take at most the time left over this
+#: (:class:`LaunchCost` counts a recording's extra; this is for the machine's
+#: noise and the line's error).
+ROUND_SAFETY = 1.15
+#: Launches a :class:`LaunchCost` keeps (the last): an earlier render's
+#: launches tell the next one's line (a time-limited render's launches
+#: alone, 1 spp then a few large ones, rarely give it two sizes), and
+#: fewer are enough for the line and keep one slow launch from holding it up
+#: for long.
+KEPT_LAUNCHES = 8
+#: A 1-spp launch's share that is its fixed part, where neither a launch of
+#: more spp nor its kernels' run time measured it (0.1-0.7 on the gallery
+#: at 256 px): where it is less, a launch of k spp takes up to
+#: 1 / (1 - this) times what the line says (``spot_textures``, 0.11: 1.16
+#: times at 4 spp), and one such launch measures the line.
+ONE_SIZE_FIXED = 0.25
+
+
+class Launch(NamedTuple):
+    """One launch of passes, as :class:`LaunchCost` keeps it: its spp and
+    seconds, whether it recorded its kernels' replay (:mod:`.replay`), its
+    kernels' run time, what recording added to it (None: not measured) and
+    whether it was the first launch its cost saw (whose recording also paid
+    for first uses)."""
+
+    spp: int
+    seconds: float
+    recorded: bool = False
+    execute: float | None = None
+    first: bool = False
+    recording: float | None = None
+
+
+@dataclass
+class LaunchCost:
+    """What a launch of passes costs: ``fixed + per_spp * spp`` seconds, the
+    line through the replayed launches so far (``launches``: :class:`Launch`
+    records, or plain (spp, seconds, recorded) tuples; a recorded one less
+    what recording took, where measured) moved up until none took longer
+    than it says; a launch of an spp not launched before records
+    anew, which adds :attr:`record_s`.  Where a new spp compiles no kernel
+    (``spp_compiles`` False: a sampler that does not bake its spp in,
+    :func:`~.scene_query.sampler_bakes_spp`), what a launch spent compiling
+    (a process's first, or the disk cache's first) is left out of its time.
+
+    A launch's fixed part (its kernels' start, reading every pixel back)
+    makes a 1-spp launch cost about two of a larger launch's spp.  Where the
+    launches so far have one size, the part of them that is not their
+    kernels' run time is taken as the fixed part (the run time also has a
+    part that does not grow with the spp, so this line overestimates larger
+    launches, never smaller ones by much); where that was not measured, a
+    1-spp launch's fixed part is taken as :data:`ONE_SIZE_FIXED` of it, and
+    another single size's as 0.
+
+    Examples
+    --------
+    >>> cost = LaunchCost()
+    >>> cost.add(1, 0.036, recorded=True); cost.add(1, 0.018); round(cost(4), 4)
+    0.0765
+    >>> round(cost.record_s, 3), cost.fits(0.05), cost.fits(0.07)
+    (0.018, 2, 3)
+    >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
+    (0.078, 3)
+
+    The kernels' run time splits a single size's launches (here a fixed
+    0.012 s, and at most 0.008 s an spp):
+
+    >>> cost = LaunchCost([Launch(1, 0.02, False, 0.006), Launch(1, 0.018, False, 0.006)])
+    >>> round(cost(4), 3), cost.fits(0.05)
+    (0.044, 4)
+
+    A recorded launch's time tells what recording adds, not the line, and a
+    cost's first launch tells it only until another launch has recorded:
+
+    >>> cost = LaunchCost([(1, 0.045, True), (1, 0.020, False), (2, 0.040, True)])
+    >>> round(cost.record_s, 3), cost.fits(0.1)
+    (0.005, 6)
+
+    Where a new spp compiles, only the spp launched before are planned:
+
+    >>> cost = LaunchCost([(1, 0.02, False), (4, 0.05, False)], spp_compiles=True)
+    >>> cost.fits(0.1), cost.cheapest(), cost(2)
+    (4, 1, inf)
+    """
+
+    launches: list = field(default_factory=list)
+    spp_compiles: bool = False
+    #: spp whose launch has a recording already (another trace of the same
+    #: layout made it: :meth:`~.api.GridTracer.pass_recorded`): it records
+    #: nothing anew, and compiles nothing where ``spp_compiles``.
+    replays: frozenset = frozenset()
+
+    def __post_init__(self):
+        self.launches = [Launch(*launch) for launch in self.launches]
+
+    def add(self, spp: int, seconds: float, recorded: bool = False,
+            compile_s: float = 0.0, execute_s: float | None = None,
+            recording_s: float | None = None) -> None:
+        """Add a launch (``compile_s``: what of it compiled kernels;
+        ``execute_s``: its kernels' run time; ``recording_s``: what it spent
+        recording its kernels' replay, to which a new spp's compilation adds
+        where ``spp_compiles``), the first if the cost holds none; only the
+        last :data:`KEPT_LAUNCHES` are kept."""
+        first = not self.launches
+        if not self.spp_compiles:
+            seconds -= compile_s
+        elif recording_s is not None:
+            recording_s += compile_s
+        self.launches.append(Launch(
+            int(spp), float(seconds), bool(recorded), None if not execute_s else float(execute_s),
+            bool(first), None if not recorded or recording_s is None
+            else float(np.clip(recording_s, 0.0, seconds))))
+        del self.launches[:-KEPT_LAUNCHES]
+
+    def _line(self) -> tuple[float, float]:
+        """(fixed, per_spp) of a replayed launch: through the replayed
+        launches and the recorded ones whose recording was measured (all of
+        them where none was), each less what recording took."""
+        # (a cost's first launch also paid for first uses; a line through small
+        # replays alone misses what larger launches cost)
+        measured = [launch for launch in self.launches if not launch.recorded
+                    or (launch.recording is not None and not launch.first)]
+        points = [launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
+                  for launch in measured or self.launches]
+        if not points:
+            return 0.0, 0.0
+        spp = np.array([launch.spp for launch in points], dtype=float)
+        seconds = np.array([launch.seconds for launch in points])
+        sizes = len(set(spp))
+        slope = float(np.polyfit(spp, seconds, 1)[0]) if sizes > 1 else 0.0
+        if slope > 0:  # the fitted slope, moved up until no launch took longer
+            fixed = float(np.clip((seconds - slope * spp).max(), 0.0, seconds.min()))
+        elif sizes > 1:
+            fixed = 0.0
+        elif all(launch.execute is not None for launch in points):
+            fixed = float(np.clip(min(launch.seconds - launch.execute for launch in points),
+                                  0.0, seconds.min()))
+        else:
+            fixed = ONE_SIZE_FIXED * float(seconds.min()) if set(spp) == {1} else 0.0
+        return fixed, float(((seconds - fixed) / spp).max())
+
+    @property
+    def replayed(self) -> bool:
+        """Whether some launch replayed its kernels (the line is a launch's cost)."""
+        return not all(launch.recorded for launch in self.launches)
+
+    @property
+    def record_s(self) -> float:
+        """What recording adds to a launch of a new spp: what the last
+        recorded launch spent recording (where measured, else what it took
+        beyond the line; with its compilation where ``spp_compiles``), other
+        than a first launch where another recorded (its recording also paid
+        for first uses, once); 0 where no launch recorded, or every launch
+        did and none measured it."""
+        recorded = [launch for launch in self.launches if launch.recorded]
+        recorded = [launch for launch in recorded if not launch.first] or recorded
+        if not recorded:
+            return 0.0
+        last = recorded[-1]
+        if last.recording is not None:
+            return last.recording
+        if not self.replayed:
+            return 0.0
+        fixed, per_spp = self._line()
+        return max(last.seconds - fixed - per_spp * last.spp, 0.0)
+
+    def _new(self, spp: int) -> bool:
+        return spp not in self.replays and all(spp != launch.spp for launch in self.launches)
+
+    def _unplanned(self, spp: int) -> bool:
+        """Whether ``spp`` is not planned: a new spp (not in :attr:`replays`)
+        where it compiles (``spp_compiles``) and some spp has been launched.  Whether its
+        kernels come from Dr.Jit's disk cache or compile (several seconds
+        for some scenes) no recording tells."""
+        return self.spp_compiles and bool(self.launches) and self._new(spp)
+
+    def __call__(self, spp: int) -> float:
+        """Seconds a launch of ``spp`` is expected to take (recorded anew
+        where no launch had that spp; infinite where :meth:`_unplanned`)."""
+        if self._unplanned(spp):
+            return math.inf
+        fixed, per_spp = self._line()
+        return fixed + per_spp * spp + (self.record_s if self._new(spp) else 0.0)
+
+    def cheapest(self) -> int:
+        """The spp of the launch expected to cost least, of 1, those
+        launched before and :attr:`replays` (only those two where a new spp
+        compiles)."""
+        sizes = [1, *self.replays] + [launch.spp for launch in self.launches]
+        return min((spp for spp in sizes if not self._unplanned(spp)),
+                   key=lambda spp: (self(spp), spp))
+
+    def first(self, seconds: float) -> int:
+        """The spp of a time-limited render's first launch, to end within
+        ``seconds``: the most that :meth:`fits` ``seconds`` over
+        :data:`ROUND_SAFETY`, else the cheapest; where a new spp compiles,
+        an spp launched before that fits ``seconds`` itself where it is more
+        (a stratifying sampler's one launch of more spp beats several of
+        fewer, each a stratum of its own; the rest of the time is filled
+        after it).
+
+        Examples
+        --------
+        >>> cost = LaunchCost([(9, 0.25, False)], spp_compiles=True, replays=frozenset([1]))
+        >>> cost.first(0.1), cost.first(0.27), cost.first(0.4)
+        (1, 9, 9)
+        """
+        fits = self.fits(seconds / ROUND_SAFETY)
+        if self.spp_compiles:
+            fixed, per_spp = self._line()
+            fits = max([fits] + [launch.spp for launch in self.launches
+                                 if fixed + per_spp * launch.spp <= seconds])
+        return fits or self.cheapest()
+
+    def fits(self, seconds: float) -> int:
+        """The most spp a launch expected to take at most ``seconds`` may
+        have (only those launched before or in :attr:`replays` where a new
+        spp compiles)."""
+        fixed, per_spp = self._line()
+        if per_spp <= 0:
+            return 0
+        launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
+                    if fixed + per_spp * spp <= seconds]
+        anew = [] if self.spp_compiles and self.launches else [
+            int((seconds - self.record_s - fixed) // per_spp)]
+        return max(launched + anew + [0])
