@@ -399,8 +399,12 @@ def _full_render(scene, integrator, sensor, spp, seed) -> tuple[np.ndarray, np.n
     start = time.perf_counter()
     count = sensor.sampler().sample_count()
     try:
-        image = mi.render(scene, integrator=integrator, sensor=sensor, seed=seed, spp=spp or 0)
-        dr.eval(image)
+        # (as a plain mi.render call runs: without the kernel history that
+        # render() keeps on for its own traces, which adds to every launch)
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, False):
+            image = mi.render(scene, integrator=integrator, sensor=sensor, seed=seed,
+                              spp=spp or 0)
+            dr.eval(image)
     finally:  # mi.render(spp=...) leaves the sensor's sampler at that count
         sensor.sampler().set_sample_count(count)
     image = np.array(image, dtype=np.float64)
