@@ -3,7 +3,6 @@ import pytest
 
 from mitsuba_mrt import MRTParams, SparseTrace, grid_pattern, reconstruct
 from mitsuba_mrt.recon import llvm_arrays
-from mitsuba_mrt.recon import quadric_jit as fast_jit
 from mitsuba_mrt.recon import within_region as fast
 from mitsuba_mrt.runtime import threads
 from mitsuba_mrt.recon.compose import ALBEDO_EPS, albedo_constant_per_id
