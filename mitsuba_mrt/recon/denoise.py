@@ -135,11 +135,6 @@ PRIOR_SECONDS = {"fast": 1.45e-6, "balanced": 2.8e-6, "high": 2.8e-6}
 #: the next ones (OIDN makes that filter's buffers as it runs): 0.25-0.35 on
 #: 2 cores at 256-512 px.
 FIRST_CALL_SHARE = 0.35
-#: The process's first OIDN call takes at least this long, whatever the
-#: image's size: it sets OIDN up beyond the filter (on 2 cores, first calls
-#: on 81 x 81 to 115 x 115 pixels took 10-15 ms, where the per-pixel prior
-#: says 6-13, and 5-7 ms more than the next call on the same image).
-FIRST_PROCESS_CALL_S = 0.016
 
 
 def expected_seconds(pixels: int, quality: str) -> float:
@@ -147,8 +142,7 @@ def expected_seconds(pixels: int, quality: str) -> float:
     take: the recent calls' on that many pixels; else :func:`denoise_seconds`
     (from other sizes), or before any call at ``quality`` in this process
     :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
-    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer, and before any
-    call in the process at least :data:`FIRST_PROCESS_CALL_S`."""
+    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
     seconds = denoise_seconds(pixels, quality)
     if pixels in _state.get("recent", {}).get(quality, {}):
         return seconds
@@ -156,8 +150,7 @@ def expected_seconds(pixels: int, quality: str) -> float:
         import drjit as dr
 
         seconds = PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1)
-    seconds *= 1.0 + FIRST_CALL_SHARE
-    return seconds if _state.get("recent") else max(seconds, FIRST_PROCESS_CALL_S)
+    return seconds * (1.0 + FIRST_CALL_SHARE)
 
 
 def _device(oidn):
