@@ -50,7 +50,7 @@ from ..types import MRTParams, SeedStream
 from . import kept_plans
 from .auto_limit import (TIME_MARGIN, kept_cost, note_final_denoise, note_first_round,
                          plan_within)
-from .auto_plans import (HOME_MIN_SPP, AutoOutcome, Traced, find_surfaces, mrt_by_kind)
+from .auto_plans import HOME_MIN_SPP, AutoOutcome, Traced, find_surfaces, mrt_by_kind
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
 from .replay import recordings, token
