@@ -413,7 +413,7 @@ def check_radiance(radiance: np.ndarray, where: str = "traced pixels") -> None:
                        f"{int(bad.sum())} of {bad.size} {where}")
 
 
-def _integer(value) -> bool:
+def is_integer(value) -> bool:
     """Whether ``value`` is an integer (a Python or NumPy one; not a bool)."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
@@ -426,7 +426,7 @@ def check_spp(spp) -> int:
     >>> check_spp(4), check_spp(np.int64(4))
     (4, 4)
     """
-    if not _integer(spp):
+    if not is_integer(spp):
         raise MRTError(f"spp must be an integer >= 1, got {spp!r}")
     if spp < 1:
         raise MRTError(f"spp must be >= 1, got {spp}")
@@ -442,6 +442,6 @@ def check_seed(seed) -> int:
     >>> check_seed(7), check_seed(np.uint32(7))
     (7, 7)
     """
-    if not _integer(seed) or not 0 <= seed < 1 << 32:
+    if not is_integer(seed) or not 0 <= seed < 1 << 32:
         raise MRTError(f"seed must be an integer in [0, 2^32), got {seed!r}")
     return int(seed)

@@ -95,7 +95,8 @@ WITHIN_REASON = "{}; within the time limit"
 
 #: Seconds from a time-limited render's start to the end of its first round
 #: of passes, per traced objects and pixel count, from the last such render
-#: in this process whose kernels were all replayed: what tells a limit too
+#: in this process whose kernels were all replayed (the last
+#: :data:`KEPT_COSTS` keys): what tells a limit too
 #: short for one pass and OIDN before a pass is traced.  A time that gives a
 #: preview is dropped: a preview traces no round, so one slow round would
 #: otherwise give previews for good.
@@ -190,7 +191,7 @@ def note_first_round(key: tuple, seconds: float) -> None:
     """Keep ``seconds``, from a time-limited render's start to the end of
     its first round of passes, all its kernels replayed, for the next
     render of ``key`` (:data:`_first_round_s`)."""
-    _first_round_s[key] = seconds
+    _keep(_first_round_s, key, seconds)
 
 
 def note_final_denoise(key: tuple, shading: bool, seconds: float) -> None:

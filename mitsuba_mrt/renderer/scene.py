@@ -11,7 +11,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError, MRTWarning
-from ..types import MRTParams
+from ..types import MRTParams, is_integer
 
 #: Memory a render needs per pixel, roughly: the traced AOVs, the modes' images
 #: and temporaries (float64 radiance, ids, masks) and the reference's film.
@@ -181,7 +181,7 @@ def resolve_sensor(scene: mi.Scene, sensor) -> mi.Sensor:
     """``sensor`` itself, or the scene's sensor of that index (checked)."""
     if isinstance(sensor, mi.Sensor):
         return sensor
-    if isinstance(sensor, bool) or not isinstance(sensor, (int, np.integer)):
+    if not is_integer(sensor):
         raise MRTError(f"sensor must be an index or a Mitsuba sensor, got {sensor!r}")
     sensors = scene.sensors()
     if not 0 <= int(sensor) < len(sensors):

@@ -1354,3 +1354,11 @@ def test_passes_the_planner_weighs_and_chooses_go_on_untraced_again(variant, mon
     assert result.mode_used == "full+oidn" and len(plan.candidates) > 2
     assert plan.reason.startswith("more passes would cost more than a full render")
     assert sum(launched) == result.spp  # each pass traced once
+
+
+def test_the_first_rounds_times_keep_the_last_scenes_only(monkeypatch):
+    monkeypatch.setattr(auto_limit, "_first_round_s", {})
+    for k in range(auto_limit.KEPT_COSTS + 5):
+        auto_limit.note_first_round(("scene", k), 0.1 * k)
+    assert list(auto_limit._first_round_s) == [("scene", k) for k in
+                                               range(5, auto_limit.KEPT_COSTS + 5)]
