@@ -122,8 +122,10 @@ class MRTParams:
         return "paper" if mode == "paper" else "exact"
 
     def with_(self, **changes) -> "MRTParams":
-        """A copy with some fields changed (None values are ignored)."""
-        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+        """A copy with some fields changed (None values are ignored); these
+        same parameters where none is."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return replace(self, **changes) if changes else self
 
     def as_dict(self) -> dict:
         return asdict(self)

@@ -202,6 +202,10 @@ def _note_overrun(result: MRTResult) -> None:
                           f"{limit:.3g} s{least}")
 
 
+#: The parameters of a render that sets none (frozen: shared).
+_DEFAULTS = MRTParams()
+
+
 def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
             param_overrides) -> MRTResult:
     """:func:`render`'s work, its arguments as given: checked, then mode
@@ -210,7 +214,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     start, recorded = time.perf_counter(), recordings()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
-    params = (params or wrapper.params or MRTParams()).with_(**param_overrides)
+    params = (params or wrapper.params or _DEFAULTS).with_(**param_overrides)
     check_controls(mode, params)
     sensor = resolve_sensor(scene, sensor)
     tracer = GridTracer(scene, sensor, wrapper.nested, _spp_of(spp, sensor), check_seed(seed))

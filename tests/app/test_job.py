@@ -57,6 +57,16 @@ def test_a_jobs_overrides_go_on_top_of_the_scenes_parameters():
         RenderJob(scene="x.xml", param_overrides={"sample_fraction": 2.0}).params_for(None)
 
 
+def test_parameters_without_a_change_are_the_same_object():
+    from mitsuba_mrt import MRTParams
+
+    params = MRTParams(filter_sigma=2.0)
+    assert params.with_() is params
+    assert params.with_(time_limit=None) is params
+    assert params.with_(time_limit=1.0) == MRTParams(filter_sigma=2.0, time_limit=1.0)
+    assert params.with_(time_limit=1.0) is not params
+
+
 def test_why_says_an_mrt_images_check_found_no_error_it_could_resolve():
     from types import SimpleNamespace
 
