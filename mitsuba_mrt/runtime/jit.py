@@ -86,8 +86,8 @@ class KernelSeconds:
 def kernel_seconds():
     """Yield a :class:`KernelSeconds` that holds, after the block, what
     Dr.Jit spent on the block's kernels (from its kernel history, which is
-    switched on inside the block and read, so cleared, at both ends: blocks
-    do not nest).
+    switched on inside the block, cleared at its start and read, so cleared,
+    at its end: blocks do not nest).
 
     Examples
     --------
@@ -101,7 +101,7 @@ def kernel_seconds():
     spent = KernelSeconds()
     before = dr.flag(dr.JitFlag.KernelHistory)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()  # (reading the history clears it)
+    dr.kernel_history_clear()
     try:
         yield spent
     finally:
@@ -135,6 +135,6 @@ def recording_flags():
     try:
         yield
     finally:
-        if not before:
-            dr.kernel_history()  # (reading the history clears it)
+        if not before:  # (cleared, not read: an entry holds its kernel's IR)
+            dr.kernel_history_clear()
             dr.set_flag(dr.JitFlag.KernelHistory, False)
