@@ -36,7 +36,8 @@ ONE_SIZE_FIXED = 0.25
 class Launch(NamedTuple):
     """One launch of passes, as :class:`LaunchCost` keeps it: its spp and
     seconds, whether it recorded its kernels' replay (:mod:`.replay`), its
-    kernels' run time, what recording added to it (None: not measured) and
+    trace kernels' run time (:attr:`~mitsuba_mrt.runtime.jit.KernelSeconds.widest`),
+    what recording added to it (None: not measured) and
     whether it was the first launch its cost saw (whose recording also paid
     for first uses)."""
 
@@ -62,10 +63,11 @@ class LaunchCost:
 
     A launch's fixed part (its kernels' start, reading every pixel back)
     makes a 1-spp launch cost about two of a larger launch's spp.  Where the
-    launches so far have one size, the part of them that is not their
-    kernels' run time is taken as the fixed part (the run time also has a
-    part that does not grow with the spp, so this line overestimates larger
-    launches, never smaller ones by much); where that was not measured, a
+    launches so far have one size, the part of them that is not their trace
+    kernels' run time is taken as the fixed part (the kernels that read each
+    pixel back are in it; the trace's run time also has a part that does
+    not grow with the spp, so this line overestimates larger launches, never
+    smaller ones by much); where that was not measured, a
     1-spp launch's fixed part is taken as :data:`ONE_SIZE_FIXED` of it, and
     another single size's as 0.
 
@@ -114,7 +116,7 @@ class LaunchCost:
             compile_s: float = 0.0, execute_s: float | None = None,
             recording_s: float | None = None) -> None:
         """Add a launch (``compile_s``: what of it compiled kernels;
-        ``execute_s``: its kernels' run time; ``recording_s``: what it spent
+        ``execute_s``: its trace kernels' run time; ``recording_s``: what it spent
         recording its kernels' replay, to which a new spp's compilation adds
         where ``spp_compiles``), the first if the cost holds none; only the
         last :data:`KEPT_LAUNCHES` are kept."""

@@ -521,7 +521,7 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
     recording_s = recording_seconds() - recording
     alone = recording_s + share * (seconds - recording_s)
     cost.add(passes.count - count, alone, recordings() > recorded, spent.compile,
-             None if not spent.execute else share * spent.execute, recording_s=recording_s)
+             None if not spent.widest else share * spent.widest, recording_s=recording_s)
     return seconds
 
 

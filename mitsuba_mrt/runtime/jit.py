@@ -73,13 +73,23 @@ def counting_kernels():
         counts[:] = [after[2] - before[2], after[1] - before[1]]
 
 
+#: A kernel of at most this many operations moves data (a copy, a gather,
+#: a sum per pixel of a trace's lanes) rather than tracing: not one of
+#: :attr:`KernelSeconds.widest`'s.
+DATA_OPS = 100
+
+
 @dataclass
 class KernelSeconds:
     """Seconds Dr.Jit spent on the kernels of a block: compiling those not
-    found in its caches, and executing all of them."""
+    found in its caches, and executing all of them; ``widest``: executing
+    those over the most lanes, of more than :data:`DATA_OPS` operations each
+    (a trace's own kernels, which grow with its samples, where the others,
+    reading back per pixel, do not)."""
 
     compile: float = 0.0
     execute: float = 0.0
+    widest: float = 0.0
 
 
 @contextlib.contextmanager
@@ -94,7 +104,7 @@ def kernel_seconds():
     >>> with kernel_seconds() as spent:
     ...     pass
     >>> spent
-    KernelSeconds(compile=0.0, execute=0.0)
+    KernelSeconds(compile=0.0, execute=0.0, widest=0.0)
     """
     import drjit as dr
 
@@ -109,7 +119,21 @@ def kernel_seconds():
         spent.compile = sum(entry.get("codegen_time", 0.0) + entry.get("backend_time", 0.0)
                             for entry in history if not entry.get("cache_hit")) / 1e3
         spent.execute = sum(entry.get("execution_time", 0.0) for entry in history) / 1e3
+        spent.widest = _widest_seconds(history)
         dr.set_flag(dr.JitFlag.KernelHistory, before)
+
+
+def _widest_seconds(history: list) -> float:
+    """:attr:`KernelSeconds.widest` of the entries of a kernel history."""
+    import drjit as dr
+
+    traced = [entry for entry in history if entry.get("type") == dr.KernelType.JIT
+              and entry.get("operation_count", 0) > DATA_OPS]
+    if not traced:
+        return 0.0
+    lanes = max(entry.get("size", 0) for entry in traced)
+    return sum(entry.get("execution_time", 0.0) for entry in traced
+               if entry.get("size", 0) == lanes) / 1e3
 
 
 @contextlib.contextmanager
