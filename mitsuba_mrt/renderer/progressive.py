@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -556,57 +557,31 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     xy = every_pixel(width, height)
     n = len(xy)
     rows = estimate_rows(height, width)
-    crop = (rows[:, None] * width + np.arange(width)[None, :]).ravel()
-    passes, progress, launch = Passes(crop), Progress(), 0
-    # a round is one launch, its halves its odd and even samples: a single
-    # launch keeps a stratifying sampler's strata whole (two launches of half
-    # the spp gave 1.3-1.6x the error of one on such scenes)
-    bakes = sampler_bakes_spp(tracer.sensor.sampler())
-    cost = LaunchCost(spp_compiles=bakes) if cost is None else cost
-    # A time limit alone needs no estimates: the passes fill the time, in one
-    # half, and leave the last OIDN call its expected time.  Under a deadline
-    # a sampler that compiles kernels per spp keeps the default rounds'
-    # layout (all of a launch in one half, as beside their companion; the
-    # guides throughout), so that the spp launched before replay their
-    # kernels (a new spp's compilation is its LaunchCost.record_s)
+    passes = Passes((rows[:, None] * width + np.arange(width)[None, :]).ravel())
+    progress, launch = Progress(), 0
+    layout = _lay_out(passes, tracer, len(rows), width, n, fixed, deadline, target_error)
+    cost = LaunchCost(spp_compiles=layout.bakes) if cost is None else cost
     final, quality = quality, preset(quality)  # (the estimates' preset)
-    estimates = not fixed and not (deadline is not None and target_error is None)
-    passes.estimated = estimates
-    # a sampler that bakes its spp stratifies a pixel's samples: the estimates
-    # take every other row of the strips again, in the same launches
-    if estimates and bakes:
-        passes.companion = np.flatnonzero(np.repeat(np.arange(len(rows)) % 2 == 0, width))
-    # (``cost`` holds launches without their companion: one traces its share of the pixels more)
-    with_companion = 1.0 + (0.0 if passes.companion is None else len(passes.companion) / n)
-    # (under a deadline a launch traces no more spp than planned)
-    exact = (None if deadline is None or not bakes else
-             lambda spp: sample_count_at_most(tracer.sensor.sampler(), spp))
-    round_size, oidn_s = _first_round(fixed, estimates, deadline, target_error, cost, exact,
-                                      max_spp, full_spp, n, quality if denoise else None)
-    passes.guide_spp = max_spp if deadline is not None and bakes else max(GUIDE_PASSES,
-                                                                          round_size)
+    round_size, oidn_s = _first_round(fixed, layout.estimates, deadline, target_error, cost,
+                                      layout.exact, max_spp, full_spp, n,
+                                      quality if denoise else None)
+    passes.guide_spp = (max_spp if deadline is not None and layout.bakes
+                        else max(GUIDE_PASSES, round_size))
     while True:
         begin = time.perf_counter()
         # (a round's two halves serve the estimates alone)
-        launch = _trace_round(passes, tracer, xy, round_size, launch, estimates, cost)
+        launch = _trace_round(passes, tracer, xy, round_size, launch, layout.estimates, cost)
         if surfaces is not None and denoise:
             passes.find_textured(surfaces, max_spp)
         spent = time.perf_counter() - begin
         progress.trace_s += spent
-        pass_s = spent / round_size
         progress.spp = passes.count
         next_size = passes.count  # the next round doubles the passes
-        next_size = next_size if exact is None else exact(next_size)
+        next_size = next_size if layout.exact is None else layout.exact(next_size)
         at_cap = passes.count + next_size > max_spp  # this round is the last
-        if estimates and denoise and progress.history and at_cap:
-            # its estimate would change no decision: the earlier rounds' predict it
-            progress.predicted = predict(progress.history, passes.count)
-        elif estimates:
-            begin = time.perf_counter()
-            _estimate(passes, progress, width, quality, full_spp, area, denoise)
-            # OIDN's cost on the whole image, from the estimate's call (and earlier ones)
-            oidn_s = expected_seconds(n, quality) if denoise else 0.0
-            progress.estimate_s += time.perf_counter() - begin
+        if layout.estimates:
+            oidn_s = _round_estimate(passes, progress, at_cap, width, n, quality, full_spp,
+                                     area, denoise, oidn_s)
         if on_round is not None:
             on_round(f"passes ({passes.count} spp)", min(passes.count / max_spp, 1.0))
         target = progress.full_error if target_error is None and deadline is None \
@@ -616,7 +591,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             progress.stopped = "met the target"
             break
         if stop_early is not None:
-            reason = stop_early(progress, pass_s)
+            reason = stop_early(progress, spent / round_size)
             if reason:
                 progress.stopped = reason
                 return None, None, progress
@@ -625,28 +600,112 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             progress.stopped = f"reached {passes.count} spp" + (", short of the target"
                                                                  if short else "")
             break
-        # without estimates nothing is learnt from rounds: once a launch was
-        # replayed (here or by an earlier render: the first, if it recorded,
-        # is not a launch's cost), the passes fill the time at once
-        round_s = with_companion * cost(next_size)
-        measured = passes.count >= FIRST_ROUND or cost.replayed
-        if deadline is not None and ((not estimates and measured) or time.perf_counter()
-                                     + ROUND_SAFETY * round_s + oidn_s > deadline):
+        if deadline is not None and _out_of_time(passes, layout, cost, next_size, deadline,
+                                                 oidn_s):
             progress.stopped = "the time limit"
-            # the passes fill what the last OIDN call leaves of the time
-            left = max(deadline - time.perf_counter() - oidn_s, 0.0)
-            final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
-            _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n),
-                  cost, max_spp, launch, halves=estimates, exact=exact,
-                  least=2 if estimates else 1, companion=with_companion)
+            final = _fill_time(passes, progress, tracer, xy, layout, cost, final, deadline,
+                               oidn_s, max_spp, launch)
             break
         round_size = next_size
-        if not bakes and target is not None and progress.history:
+        if not layout.bakes and target is not None and progress.history:
             round_size = to_target(progress.history, target, passes.count, next_size)
     image = (_final_denoise(passes, progress, final, deadline, oidn_s, (height, width, 3))
              if denoise else passes.mean)
     return (image.reshape(height, width, 3),
             (passes.alpha / passes.count).reshape(height, width), progress)
+
+
+@dataclass
+class _Layout:
+    """How :func:`run_passes` launches its passes: whether it estimates their
+    error (not under a time limit alone, nor for a plan an earlier render
+    measured), whether the sampler compiles kernels per spp (``bakes``),
+    the spp a launch of at most so many takes (``exact``; None: as many),
+    and what a launch takes with its companion's pixels over what it takes
+    alone (``companion``; :attr:`Passes.companion`)."""
+
+    estimates: bool
+    bakes: bool
+    exact: Callable[[int], int] | None = None
+    companion: float = 1.0
+
+
+def _lay_out(passes: Passes, tracer, rows: int, width: int, pixels: int, fixed: bool,
+             deadline: float | None, target_error: float | None) -> _Layout:
+    """The :class:`_Layout` of :func:`run_passes`'s passes; ``passes`` told
+    whether they are estimated and which pixels are their companion.
+
+    A round is one launch, its halves its odd and even samples: a single
+    launch keeps a stratifying sampler's strata whole (two launches of half
+    the spp gave 1.3-1.6x the error of one on such scenes).  A time limit
+    alone needs no estimates: the passes fill the time, in one half, and
+    leave the last OIDN call its expected time.  Under a deadline a sampler
+    that compiles kernels per spp keeps the default rounds' layout (all of a
+    launch in one half, as beside their companion; the guides throughout),
+    so that the spp launched before replay their kernels (a new spp's
+    compilation is its :attr:`~.launch_cost.LaunchCost.record_s`), and a
+    launch traces no more spp than planned."""
+    sampler = tracer.sensor.sampler()
+    bakes = sampler_bakes_spp(sampler)
+    estimates = not fixed and not (deadline is not None and target_error is None)
+    passes.estimated = estimates
+    # a sampler that bakes its spp stratifies a pixel's samples: the estimates
+    # take every other row of the strips again, in the same launches
+    if estimates and bakes:
+        passes.companion = np.flatnonzero(np.repeat(np.arange(rows) % 2 == 0, width))
+    # (``cost`` holds launches without their companion: one traces its share of the pixels more)
+    companion = 1.0 + (0.0 if passes.companion is None else len(passes.companion) / pixels)
+    exact = (None if deadline is None or not bakes
+             else (lambda spp: sample_count_at_most(sampler, spp)))
+    return _Layout(estimates, bakes, exact, companion)
+
+
+def _round_estimate(passes: Passes, progress: Progress, at_cap: bool, width: int, pixels: int,
+                    quality: str, full_spp: int, area: float, denoise: bool,
+                    oidn_s: float) -> float:
+    """After a round of :func:`run_passes` that estimates: its estimate
+    (:func:`_estimate`), or where it is the last round (``at_cap``) and
+    earlier rounds were estimated, their prediction (its estimate would
+    change no decision); the last OIDN call's expected seconds returned,
+    from the estimate's call and earlier ones."""
+    if denoise and progress.history and at_cap:
+        progress.predicted = predict(progress.history, passes.count)
+        return oidn_s
+    begin = time.perf_counter()
+    _estimate(passes, progress, width, quality, full_spp, area, denoise)
+    oidn_s = expected_seconds(pixels, quality) if denoise else 0.0
+    progress.estimate_s += time.perf_counter() - begin
+    return oidn_s
+
+
+def _out_of_time(passes: Passes, layout: _Layout, cost: LaunchCost, next_size: int,
+                 deadline: float, oidn_s: float) -> bool:
+    """Under a deadline, whether :func:`run_passes` ends its rounds and
+    fills the time left (:func:`_fill_time`): at once without estimates
+    (nothing is learnt from rounds) once a launch's cost is measured (a
+    round of :data:`FIRST_ROUND` passes, or a launch an earlier render
+    replayed: the first, if it recorded, is not a launch's cost); else where
+    the next round, times :data:`~.launch_cost.ROUND_SAFETY`, and the last
+    OIDN call would end past ``deadline``."""
+    if not layout.estimates and (passes.count >= FIRST_ROUND or cost.replayed):
+        return True
+    round_s = layout.companion * cost(next_size)
+    return time.perf_counter() + ROUND_SAFETY * round_s + oidn_s > deadline
+
+
+def _fill_time(passes: Passes, progress: Progress, tracer, xy: np.ndarray, layout: _Layout,
+               cost: LaunchCost, final: str, deadline: float, oidn_s: float, max_spp: int,
+               launch: int) -> str:
+    """Launches (:func:`_fill`) in what the last OIDN call leaves of the time
+    before ``deadline``; that call's preset returned (:func:`_final_preset`,
+    for the time the passes will have had)."""
+    n = len(xy)
+    left = max(deadline - time.perf_counter() - oidn_s, 0.0)
+    final = _final_preset(final, progress, progress.trace_s + left, oidn_s, left, n)
+    _fill(passes, progress, tracer, xy, deadline - _oidn_s(final, oidn_s, n), cost, max_spp,
+          launch, halves=layout.estimates, exact=layout.exact,
+          least=2 if layout.estimates else 1, companion=layout.companion)
+    return final
 
 
 def _first_round(fixed: bool, estimates: bool, deadline: float | None,
