@@ -35,7 +35,7 @@ from .pilot import effective_area
 from .pipeline import mrt_image
 from .replay import recordings
 from .scene import resolve_sensor, unwrap
-from .trace import pass_recorded, passes_recorded, trace_pixels
+from .trace import pass_recorded, trace_pixels
 
 # Intel Open Image Denoise's module, where installed, loads with the renderer:
 # its import (tens of milliseconds, mostly reading package metadata) is then
@@ -132,11 +132,6 @@ class GridTracer:
         it (with the ``guides``, the odd samples apart where ``halves``),
         would replay a recording: :func:`~.trace.pass_recorded`."""
         return pass_recorded(self.scene, self.sensor, self.integrator, spp, guides, halves)
-
-    def passes_recorded(self, guides: bool = True, halves: bool = False) -> frozenset:
-        """The spp at which :meth:`pass_recorded` holds:
-        :func:`~.trace.passes_recorded`."""
-        return passes_recorded(self.scene, self.sensor, self.integrator, guides, halves)
 
 
 def _spp_of(spp: int | None, sensor) -> int:

@@ -179,12 +179,11 @@ def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
 def kept_cost(key: tuple, tracer) -> LaunchCost:
     """The launches kept for ``key`` (new where there are none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
-    its :attr:`~.launch_cost.LaunchCost.replays` the spp at which a launch
-    would replay a recording another trace made of its layout (a full
-    render denoised, earlier passes): :meth:`~.api.GridTracer.passes_recorded`."""
+    a 1-spp launch among its :attr:`~.launch_cost.LaunchCost.replays` where
+    another trace recorded its layout (a full render denoised, at 1 spp)."""
     cost = _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
         spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))
-    cost.replays = tracer.passes_recorded()
+    cost.replays = frozenset([1] if tracer.pass_recorded(1) else [])
     return cost
 
 

@@ -316,16 +316,6 @@ def every_pixel_recorded(scene, sensor, integrator, spp: int, albedo: bool,
     return _DEVELOP.recorded(objects, layout)
 
 
-def every_pixel_recorded_spp(scene, sensor, integrator, albedo: bool,
-                             halves: bool) -> frozenset:
-    """The spp at which :func:`every_pixel_recorded` holds."""
-    width, height = (int(v) for v in sensor.film().crop_size())
-    spps = {layout[1] for layout in _DEVELOP.layouts((scene, sensor, integrator))
-            if layout[0] == width * height}
-    return frozenset(spp for spp in spps
-                     if every_pixel_recorded(scene, sensor, integrator, spp, albedo, halves))
-
-
 def filter_cell(u, cdf, first, steps: int, cells: int):
     """The cell of the tabulated filter distribution that uniform numbers ``u``
     (a Dr.Jit ``Float`` in [0, 1)) fall in: the first ``k`` with

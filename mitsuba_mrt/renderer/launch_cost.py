@@ -105,7 +105,7 @@ class LaunchCost:
     launches: list = field(default_factory=list)
     spp_compiles: bool = False
     #: spp whose launch has a recording already (another trace of the same
-    #: layout made it: :meth:`~.api.GridTracer.passes_recorded`): it records
+    #: layout made it: :meth:`~.api.GridTracer.pass_recorded`): it records
     #: nothing anew, and compiles nothing where ``spp_compiles``.
     replays: frozenset = frozenset()
 

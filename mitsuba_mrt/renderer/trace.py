@@ -19,7 +19,7 @@ from ..errors import MRTError
 from ..types import SparseTrace
 from .albedo_pass import albedo_pass
 from .develop import (ALBEDO_FIRST_SAMPLES, _develop_jit, _develop_scalar, _Developed,
-                      every_pixel_recorded, every_pixel_recorded_spp)
+                      every_pixel_recorded)
 from .ids import _ids_jit, _ids_scalar, shape_indices
 from .lanes import is_jit
 from .replay import active as replay_active
@@ -172,17 +172,6 @@ def pass_recorded(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         return False
     taken = set_sample_count(sensor.sampler().clone(), spp)
     return every_pixel_recorded(scene, sensor, integrator, taken, albedo, halves)
-
-
-def passes_recorded(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
-                    albedo: bool = True, halves: bool = False) -> frozenset:
-    """The spp (as the sensor's sampler takes them) at which
-    :func:`pass_recorded` holds: those whose trace of every pixel would
-    replay a recording, which a full render denoised (:func:`~.api.render_denoised`)
-    or the passes of an earlier render made."""
-    if not (is_jit() and replayable(scene)):
-        return frozenset()
-    return every_pixel_recorded_spp(scene, sensor, integrator, albedo, halves)
 
 
 def trace_shapes(scene: mi.Scene, sensor: mi.Sensor, pixel_xy: np.ndarray,

@@ -579,7 +579,7 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
     assert auto_limit._preview_due(1.0, 0.88, 100, "fast", shading=True)
     key = ("scene", 100)
     tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
-                             passes_recorded=frozenset)
+                             pass_recorded=lambda spp: False)
     pattern = SimpleNamespace(width=10, height=10)
     params = MRTParams(time_limit=1.0)
     started = __import__("time").perf_counter()
@@ -613,14 +613,14 @@ def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_laun
     assert auto_limit._passes_recording_s(key, probe(True, 0.330, compile=0.300)) == 0.0
     assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
     tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
-                             passes_recorded=frozenset)
+                             pass_recorded=lambda spp: False)
     auto_limit.kept_cost(key, tracer).add(1, 0.02, recorded=True)
     assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
     # another trace (a full render denoised at 1 spp) recorded the passes' first launch
     other = ("scene 2",) + key[1:]
     assert auto_limit._passes_recording_s(other, probe(True, 0.030)) == 0.0
     assert auto_limit._passes_recording_s(other, probe(False, 0.004)) == pytest.approx(0.026)
-    recorded = SimpleNamespace(sensor=tracer.sensor, passes_recorded=lambda: frozenset([1]))
+    recorded = SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp: spp == 1)
     auto_limit.kept_cost(other, recorded)
     assert auto_limit._passes_recording_s(other, probe(False, 0.004)) == 0.0
 
@@ -1313,17 +1313,13 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
     assert cost(1) == math.inf and cost.cheapest() == 9
     auto_limit._first_round_s.clear()
     # (the first render's 1-spp launches recorded: as if they had not)
-    monkeypatch.setattr(GridTracer, "passes_recorded", lambda self, **_: frozenset())
+    monkeypatch.setattr(GridTracer, "pass_recorded", lambda self, spp, **_: False)
     preview = mitsuba_mrt.render(scene, time_limit=1e-6)
     assert preview.auto.reason == auto_limit.PREVIEW_REASON
     assert auto_limit.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes
     # where a trace recorded the passes' 1-spp launch (its kernels exist), it is planned
     replayed = launch_cost.LaunchCost(cost.launches, spp_compiles=True, replays=frozenset([1]))
     assert replayed.cheapest() == 1 and replayed(1) < replayed(9) and replayed.fits(0.1) == 1
-    # ... and so is every spp another trace recorded (the alternative's ladder), not others
-    ladder = launch_cost.LaunchCost([(1, 0.02, False)], spp_compiles=True,
-                                    replays=frozenset([1, 2, 4]))
-    assert ladder.fits(0.06) == 2 and ladder.fits(0.07) == 4 and ladder(3) == math.inf
     # an independent sampler plans a pass of any spp: no such note
     plain = mitsuba_mrt.render(mi.load_string(scene_xml(64, spp=16)), time_limit=1e-6)
     assert not any("bakes" in note for note in plain.auto.notes)
