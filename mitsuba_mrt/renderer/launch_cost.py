@@ -81,7 +81,7 @@ class LaunchCost:
     >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
     (0.078, 3)
 
-    The kernels' run time splits a single size's launches (here a fixed
+    The trace kernels' run time splits a single size's launches (here a fixed
     0.012 s, and at most 0.008 s an spp):
 
     >>> cost = LaunchCost([Launch(1, 0.02, False, 0.006), Launch(1, 0.018, False, 0.006)])

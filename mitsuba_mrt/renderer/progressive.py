@@ -508,7 +508,7 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
             cost: LaunchCost) -> float:
     """:func:`_trace_pass` (with the launch's companion where one is due); its
     seconds returned.  ``cost`` gets the launch as if it traced the image's
-    pixels alone (its kernels' time scaled to their share), and whether it
+    pixels alone (its trace kernels' time scaled to their share), and whether it
     recorded: a time limit alone traces no companion, and plans its
     launches from these."""
     guides = passes.count < passes.guide_spp

@@ -574,7 +574,8 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
     # denoise plainly (no surfaces looked up) rather than take the preview
     monkeypatch.setattr(auto_limit, "expected_seconds", lambda pixels, quality: 0.1)
     monkeypatch.setattr(auto_limit, "_launch_costs", {})
-    monkeypatch.setattr(auto_limit, "textured_diffuse_shapes", lambda scene: np.array([False, True]))
+    monkeypatch.setattr(auto_limit, "textured_diffuse_shapes",
+                        lambda scene: np.array([False, True]))
     assert not auto_limit._preview_due(1.0, 0.88, 100, "fast")
     assert auto_limit._preview_due(1.0, 0.88, 100, "fast", shading=True)
     key = ("scene", 100)
@@ -586,8 +587,8 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
     outcomes = {}
     for first_s in (0.5, 0.95, 1.05):  # the last first round ended this long after the start
         monkeypatch.setattr(auto_limit, "_first_round_s", {key: first_s})
-        outcome, surfaces, found = auto_limit.preview_first(None, pattern, tracer, params, started,
-                                                       key, [])
+        outcome, surfaces, found = auto_limit.preview_first(None, pattern, tracer, params,
+                                                            started, key, [])
         outcomes[first_s] = (outcome is not None, surfaces, found)
     # (plain OIDN against PREVIEW_SLACK times the limit, 1.1 s; the shading,
     # which may go, against the limit itself)
@@ -720,7 +721,8 @@ def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_lig
     gallery = ROOT / "scenes_xml/gallery"
     checker = mitsuba_mrt.load_scene(gallery / "checker_border.xml", res=256, spp=32)
     assert not transmits(checker)
-    assert auto_plans.unmeasured_plan(checker, 256 * 256) == (auto_plans.HOME, auto_plans.TEXTURED_REASON)
+    assert auto_plans.unmeasured_plan(checker, 256 * 256) == (auto_plans.HOME,
+                                                              auto_plans.TEXTURED_REASON)
     # few edges between ids (the border's), and the check keeps the image
     result = mitsuba_mrt.render(checker)
     assert result.mode_used == "idpass" and result.auto.reason == auto_plans.TEXTURED_REASON
@@ -739,7 +741,8 @@ def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(
     gallery = ROOT / "scenes_xml/gallery"
     box = mitsuba_mrt.load_scene(gallery / "cornell.xml", res=192, spp=64)
     assert has_mirrors(box) and transmits(box) and not textured_diffuse_shapes(box).any()
-    assert auto_plans.unmeasured_plan(box, 192 * 192) == (auto_plans.SKY, auto_plans.SPECULAR_REASON)
+    assert auto_plans.unmeasured_plan(box, 192 * 192) == (auto_plans.SKY,
+                                                          auto_plans.SPECULAR_REASON)
     result = mitsuba_mrt.render(box)
     assert result.auto.reason == auto_plans.SPECULAR_REASON and result.mode_used == "refine"
     assert result.params.denoise == "oidn" and np.isfinite(result.image).all()

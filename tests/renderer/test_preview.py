@@ -80,6 +80,6 @@ def test_a_sampler_that_bakes_its_spp_is_judged_by_the_spp_it_has_launched(varia
         cost.add(16, 50.0, recorded=True)  # (its time holds its compilation)
         monkeypatch.setitem(auto_limit._launch_costs, key, cost)
         outcome, _, _ = auto_limit.preview_first(scene, pattern, tracer, params,
-                                            time.perf_counter(), key, [])
+                                                 time.perf_counter(), key, [])
         # without baking, a pass is the probe's one sample: it fits
         assert (outcome is not None and outcome.plan.choice.mode == "fast") == bakes
