@@ -15,9 +15,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: A launch is planned to take at most the time left over this
-#: (:class:`LaunchCost` counts a recording's extra; this is for the machine's
-#: noise and the line's error).
+#: A launch planned during a render is to take at most the time left over
+#: this (:class:`LaunchCost` counts a recording's extra; this is for the
+#: machine's noise and the error of a line through this render's first,
+#: recorded launch).  A render's first launch, sized by earlier renders'
+#: replayed launches, has none: their line is moved up until none took
+#: longer, and overestimates larger launches already.
 ROUND_SAFETY = 1.15
 #: Launches a :class:`LaunchCost` keeps (the last): an earlier render's
 #: launches tell the next one's line (a time-limited render's launches
@@ -211,9 +214,9 @@ class LaunchCost:
 
     def first(self, seconds: float) -> int:
         """The spp of a time-limited render's first launch, to end within
-        ``seconds``: the most that :meth:`fits` ``seconds`` over
-        :data:`ROUND_SAFETY`, else the cheapest; where a new spp compiles,
-        an spp launched before that fits ``seconds`` itself where it is more
+        ``seconds``: the most that :meth:`fits` them (the line through
+        earlier renders' launches, with no :data:`ROUND_SAFETY`), else the
+        cheapest.  Where a new spp compiles, only spp launched before fit
         (a stratifying sampler's one launch of more spp beats several of
         fewer, each a stratum of its own; the rest of the time is filled
         after it).
@@ -224,12 +227,7 @@ class LaunchCost:
         >>> cost.first(0.1), cost.first(0.27), cost.first(0.4)
         (1, 9, 9)
         """
-        fits = self.fits(seconds / ROUND_SAFETY)
-        if self.spp_compiles:
-            fixed, per_spp = self._line()
-            fits = max([fits] + [launch.spp for launch in self.launches
-                                 if fixed + per_spp * launch.spp <= seconds])
-        return fits or self.cheapest()
+        return self.fits(seconds) or self.cheapest()
 
     def fits(self, seconds: float) -> int:
         """The most spp a launch expected to take at most ``seconds`` may
