@@ -33,7 +33,7 @@ from .held_out import check_image
 from .lanes import is_jit
 from .pilot import effective_area
 from .pipeline import mrt_image
-from .replay import recordings
+from .replay import Recorded, recorded_so_far, recording_seconds, recordings
 from .scene import resolve_sensor, unwrap
 from .trace import pass_recorded, trace_pixels
 
@@ -211,7 +211,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     """:func:`render`'s work, its arguments as given: checked, then mode
     ``auto``'s plan and the image it names (:func:`_auto`), or the MRT's
     pipeline in the mode asked for (:func:`_mrt`)."""
-    start, recorded = time.perf_counter(), recordings()
+    start, recorded = time.perf_counter(), recorded_so_far()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or _DEFAULTS).with_(**param_overrides)
@@ -225,13 +225,13 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
                 None, start, progress or _quiet)
 
 
-def _auto(tracer: GridTracer, params: MRTParams, start: float, recorded: int,
+def _auto(tracer: GridTracer, params: MRTParams, start: float, recorded: Recorded,
           progress) -> MRTResult:
     """Mode ``auto``: its plan (:mod:`.auto`), then the image the plan names:
     the passes' own, a full render (``mi.render``'s), or the MRT's in the
     plan's mode (checked, :func:`_checked`, where chosen without a pilot);
     what it took kept for the next such plan (``recorded``: the kernel
-    recordings when the render began)."""
+    recordings, and their seconds, when the render began)."""
     scene, sensor = tracer.scene, tracer.sensor
     width, height = (int(v) for v in sensor.film().crop_size())
     plan = auto.plan_without_pilot(width, height, tracer.spp, is_jit(), params)
@@ -256,22 +256,24 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, recorded: int,
     result = _mrt(pattern, planned, params.with_(denoise="oidn" if choice.denoise else "none"),
                   choice.mode, plan, start, progress or _quiet, outcome.grid)
     if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
-        return _checked(result, scene, pattern, tracer, params, start, progress)
+        return _checked(result, scene, pattern, tracer, params, start, recorded, progress)
     if outcome.preview_key is not None:  # (its grid was traced: the rest, for the next preview)
         auto_limit.note_preview_after(outcome.preview_key, time.perf_counter() - begin,
                                       result.timings.denoise, width * height)
     if outcome.kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
         kept_plans.note_render(outcome.kept_key, planned.spp, result.timings.total,
-                               recordings() == recorded)
+                               recordings() == recorded.count)
     return result
 
 
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
-             params: MRTParams, start: float, progress) -> MRTResult:
+             params: MRTParams, start: float, recorded: Recorded, progress) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
     check keeps it (:func:`.auto_plans.keeps`; then :mod:`.kept_plans` keeps what
-    it took); else ``auto``'s denoised passes, the MRT's seconds and the
-    check's counted as ``check``."""
+    it took, less what recording its traces took since ``recorded``); else
+    ``auto``'s denoised passes, the MRT's seconds and the check's counted
+    as ``check``."""
+    recording_s = recording_seconds() - recorded.seconds  # (the check's own left out)
     held = check_image(result.image, result.traced_mask, tracer,
                        effective_area(tracer.sensor.film().rfilter()))
     plan = result.auto
@@ -283,7 +285,8 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
         result.timings.close(time.perf_counter() - start)
         key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
         kept_plans.note_checked(key + auto.plan_key(tracer, params), plan.choice, plan.reason,
-                                result.timings.total - held.seconds, result.timings)
+                                result.timings.total - held.seconds, result.timings,
+                                recording_s)
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

@@ -2,7 +2,8 @@
 
 A default render whose held-out check keeps its MRT image (``auto``'s
 ``idpass+oidn`` or ``refine+oidn``) notes here what it took: its seconds
-(the check's left out) and those of its traces that grow with the spp.  A
+(the check's, and what recording its traces took, left out) and those of
+its traces that grow with the spp.  A
 default render whose denoised passes ended notes their spp, OIDN preset
 and whether the textures were denoised as shading.  A later default
 render of the same key (traced objects, pixels, spp, parameters) takes
@@ -16,10 +17,11 @@ for ``idpass``, a quarter for ``refine``) up to four times it: over that
 range its error beside the alternative's at equal time holds, and its time
 is a fixed part (the id pass, OIDN on the grid, the reconstruction) plus
 the growing traces.  An spp rendered before is expected to take what its
-replays took; another, the checked spp's typical time split as the checked
-renders split theirs (the growing traces' share of each render's own
-seconds: a first render's kernel compilations swell its traces and its
-total alike), and a little more for the recordings a new spp makes
+replays took; another between two rendered before, what the line
+through theirs says; else the checked spp's typical time split as the
+checked renders split theirs (the growing traces' share of each render's
+own seconds: a first render's kernel compilations swell its traces and its
+total alike); either a little more for the recordings a new spp makes
 (:mod:`.replay`).  A sampler that bakes its spp into the kernels
 (:func:`.scene_query.sampler_bakes_spp`) would compile them at a new spp:
 there only the spp rendered before count.
@@ -85,6 +87,12 @@ class KeptPlan:
     (80, 64)
     >>> plan.spp_within(0.1, bakes=False) is None
     True
+
+    Between two spp rendered before, the line through their times:
+
+    >>> plan.seconds[16] = [0.1]
+    >>> round(plan.expected(32), 3), plan.spp_within(0.15, bakes=False)
+    (0.147, 32)
     """
 
     choice: Candidate
@@ -96,6 +104,12 @@ class KeptPlan:
         """Seconds a render at ``spp`` is expected to take (see the module)."""
         if spp in self.seconds:
             return typical(self.seconds[spp])
+        below = [s for s in self.seconds if s < spp]
+        above = [s for s in self.seconds if s > spp]
+        if below and above:  # between two measured spp: a render's time is a line in its spp
+            lo, hi = max(below), min(above)
+            t_lo, t_hi = typical(self.seconds[lo]), typical(self.seconds[hi])
+            return NEW_SPP_COST * (t_lo + (t_hi - t_lo) * (spp - lo) / (hi - lo))
         checked = self.choice.spp
         more = spp / checked - 1.0
         grows = typical(self.growing) * (more if more > 0 else (1.0 - LAUNCH_FIXED) * more)
@@ -127,18 +141,23 @@ def spp_ladder(least: int, most: int) -> list[int]:
 
 
 def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
-                 timings) -> None:
+                 timings, recording_s: float = 0.0) -> None:
     """Keep what a render of ``choice`` (a plan its check kept, at its spp)
     took for ``key``: ``seconds`` (its check left out) and the share of
     them the growing traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`)
-    took.  Another plan for ``key`` starts anew."""
+    took, both less ``recording_s``, what recording its traces' replays
+    took (:func:`~.replay.recording_seconds`; a replay takes none of it).
+    Another plan for ``key`` starts anew."""
     kept = _plans.get(key)
     if kept is None or kept.choice.name != choice.name:  # (the key holds the spp)
         kept = KeptPlan(choice, reason)
     kept.choice, kept.reason = replace(choice, seconds=None), reason
-    note(kept.seconds.setdefault(choice.spp, []), seconds, PLAN_CALLS)
-    growing = sum(getattr(timings, part) for part in GROWING[choice.mode])
-    note(kept.growing, min(growing / seconds, 1.0) if seconds > 0 else 0.0, PLAN_CALLS)
+    recording_s = min(max(recording_s, 0.0), seconds)
+    replayed = seconds - recording_s
+    note(kept.seconds.setdefault(choice.spp, []), replayed, PLAN_CALLS)
+    growing = sum(getattr(timings, part) for part in GROWING[choice.mode]) - recording_s
+    note(kept.growing, min(max(growing, 0.0) / replayed, 1.0) if replayed > 0 else 0.0,
+         PLAN_CALLS)
     keep(_plans, key, kept, KEPT_PLANS)
 
 

@@ -34,7 +34,7 @@ import math
 import sys
 import time
 from collections import OrderedDict
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import drjit as dr
 
@@ -90,6 +90,18 @@ def recording_seconds() -> float:
     kernel function (its kernels compile and run when their outputs are
     read, mostly after the call)."""
     return _recording_seconds[0]
+
+
+class Recorded(NamedTuple):
+    """:func:`recordings` and :func:`recording_seconds` at one moment (:func:`recorded_so_far`)."""
+
+    count: int
+    seconds: float
+
+
+def recorded_so_far() -> Recorded:
+    """What every :class:`Replay` has recorded so far, and in how many seconds."""
+    return Recorded(recordings(), recording_seconds())
 
 
 def active() -> bool:

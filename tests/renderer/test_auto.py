@@ -321,6 +321,24 @@ def test_a_kept_plan_s_first_render_that_compiled_does_not_shrink_its_expected_t
         kept_plans.clear()
 
 
+def test_a_checked_render_s_recordings_are_left_out_of_its_kept_time():
+    # the checked render spent 0.09 s of its 0.27 s (0.2 s of it traces) recording
+    # its traces' replays: a replay takes 0.18 s, of which the traces 0.11 s
+    choice = Candidate("refine+oidn", "mrt", 32, mode="refine", denoise=True)
+    key = ("scene",)
+    try:
+        kept_plans.note_checked(key, choice, "", 0.27, Timings(trace=0.12, trace_more=0.08),
+                                recording_s=0.09)
+        kept = kept_plans._plans[key]
+        assert kept.seconds[32] == [pytest.approx(0.18)]
+        assert kept.growing == [pytest.approx(0.11 / 0.18)]
+        # more recording than the render's seconds (a clock's noise) keeps none
+        kept_plans.note_checked(key, choice, "", 0.05, Timings(trace=0.04), recording_s=0.06)
+        assert kept.seconds[32][-1] == 0.0 and kept.growing[-1] == 0.0
+    finally:
+        kept_plans.clear()
+
+
 def test_a_sampler_that_bakes_its_spp_keeps_the_checked_plan_s_spp_under_a_time_limit(
         variant, monkeypatch):
     scene = mi.load_string(scene_xml(384, spp=16, sampler="stratified").replace(AREA_LIGHT,
