@@ -13,9 +13,10 @@ starts, in turn, one fresh process for the full render, one for the default
 box filter through OIDN, at its ``fast`` and ``high`` presets: what
 ``bench rival`` calls the alternative done right).  Each child reports its
 render call's seconds (imports and scene loading left out: every method pays
-them alike) and saves its image; errors are the report's metric against the
-converged renders ``bench rival`` uses.  Printed per scene: ``auto``'s
-time over the full render's (medians), its plan, and its error over the
+them alike) and saves its image; errors are the report's metric (and the
+noise-free MSE) against the converged renders ``bench rival`` uses (read
+from, or kept in, ``--truths``).  Printed per scene: ``auto``'s time over
+the full render's (medians), its plan, and its error over the
 alternative's at that time (interpolated on the alternative's curve, as
 ``bench rival`` does).  Modules' bytecode is kept as for a user's Python.
 """
@@ -76,23 +77,27 @@ def _child(path: Path, method: str, defines: dict, folder: str) -> tuple[dict, n
     return json.loads(out.stdout.strip().splitlines()[-1]), np.load(image_path)
 
 
-def measure(path: Path, name: str, defines: dict, rounds: int) -> list:
+def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> list:
     """``bench rival``'s rows of the full render, the default ``auto`` and
-    the alternative's ladder, each render in a fresh process."""
-    from mitsuba_mrt.bench.rival import ALTERNATIVE, Row, converged_truth
+    the alternative's ladder, each render in a fresh process; the converged
+    renders kept in ``truths`` (made and kept there if missing)."""
+    from mitsuba_mrt.bench.rival import (ALTERNATIVE, CONVERGED_SPP, Row, converged_truth,
+                                         noise_free_mse, truth_file)
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.scene import load_scene
 
-    truth = converged_truth(load_scene(str(path), **defines))
+    scene = load_scene(str(path), **defines)
+    truth = converged_truth(scene, CONVERGED_SPP, truth_file(truths, name, scene, CONVERGED_SPP))
     methods = ["full", "auto"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
     runs = {m: [] for m in methods}
     with tempfile.TemporaryDirectory() as folder:
         for _ in range(rounds):
             for method in methods:
                 report, image = _child(path, method, defines, folder)
-                reference = truth["box" if report["used"] == "full+oidn" else "film"]
-                runs[method].append((report["seconds"], paper_error(image, reference),
-                                     report["chose"]))
+                kind = "box" if report["used"] == "full+oidn" else "film"
+                runs[method].append((report["seconds"], paper_error(image, truth[kind]),
+                                     report["chose"],
+                                     noise_free_mse(image, truth[kind], truth.variances[kind])))
     full = statistics.median(r[0] for r in runs["full"])
     rows = []
     for method, rs in runs.items():
@@ -103,7 +108,8 @@ def measure(path: Path, name: str, defines: dict, rounds: int) -> list:
             quality, spp = method.split("@")
             label = f"{ALTERNATIVE[quality]}{spp}"
         rows.append(Row(name, label, 0, seconds, seconds / full,
-                        float(np.mean([r[1] for r in rs])), float("nan"), chose))
+                        float(np.mean([r[1] for r in rs])), float("nan"), chose,
+                        mse=float(np.mean([r[3] for r in rs]))))
     return rows
 
 
@@ -117,6 +123,8 @@ def main():
     parser.add_argument("--scenes", nargs="+", default=[*GALLERY_SCENES, "paper_fig1"])
     parser.add_argument("--out", help="also write NAME.csv here (--name)")
     parser.add_argument("--name", default="fresh_default")
+    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
+                        help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
     if args.out:  # (made now: not a lost run at the end)
         Path(args.out).mkdir(parents=True, exist_ok=True)
@@ -130,19 +138,22 @@ def main():
         else:
             path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
             defines = gallery_defines(name, args.res)
-        mine = measure(path, name, defines, args.rounds)
+        mine = measure(path, name, defines, args.rounds, Path(args.truths))
         rows += mine
         auto = next(r for r in mine if r.method == "auto")
         full = next(r for r in mine if r.method == "full")
         ratio = auto.error / alternative_at(mine, auto.relative_time)
+        mse = auto.mse / alternative_at(mine, auto.relative_time, "mse")
         print(f"{name}: full {full.seconds:.3f} s; auto {auto.relative_time:.2f} of it, "
-              f"error {ratio:.2f}x the alternative's at that time ({auto.chose})", flush=True)
+              f"error {ratio:.2f}x (noise-free MSE {mse:.2f}x) the alternative's at that time "
+              f"({auto.chose})", flush=True)
     if args.out:
         with open(Path(args.out) / f"{args.name}.csv", "w", newline="") as f:
             writer = csv.writer(f)
-            writer.writerow(["scene", "method", "seconds", "relative_time", "error", "chose"])
+            writer.writerow(["scene", "method", "seconds", "relative_time", "error", "mse",
+                             "chose"])
             writer.writerows([r.scene, r.method, f"{r.seconds:.4f}", f"{r.relative_time:.4f}",
-                              f"{r.error:.5f}", r.chose] for r in rows)
+                              f"{r.error:.5f}", f"{r.mse:.4g}", r.chose] for r in rows)
 
 
 if __name__ == "__main__":

@@ -157,6 +157,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 200, tradeoff 400, gallery 128; --quick 64, gallery 32)")
     b.add_argument("--scenes", default=None, metavar="DIR",
                    help="folder of the report's scenes (default: the repository's scenes_xml)")
+    b.add_argument("--truth-spp", type=int, default=None, metavar="N",
+                   help="rival: spp of the converged renders errors are measured against, "
+                        "a multiple of 128 (default 4096; kept in OUTPUT/cache)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="measure the points on the Dask cluster of this scheduler "
                         "(tcp://host:8786), a point's methods all on one worker "
@@ -245,9 +248,10 @@ def _rival(args, command: str) -> int:
     from pathlib import Path
 
     from ..bench.experiments import GALLERY_SCENES, check_res, gallery_defines
-    from ..bench.rival import FIG1_DEFINES, run_rival
+    from ..bench.rival import CONVERGED_SPP, FIG1_DEFINES, check_truth_spp, run_rival
     from ..renderer.variants import activate
 
+    truth_spp = CONVERGED_SPP if args.truth_spp is None else check_truth_spp(args.truth_spp)
     activate(args.variant)
     root = Path(args.scenes) if args.scenes else Path(__file__).resolve().parents[2] / "scenes_xml"
     res = check_res(args.res) if args.res is not None else (64 if args.quick else 256)
@@ -257,6 +261,7 @@ def _rival(args, command: str) -> int:
                    {**FIG1_DEFINES, **({"res": 64} if args.quick else {})}))
     repeats = (1 if args.quick else 2) if args.repeats is None else args.repeats
     table = run_rival(args.output, scenes, repeats=repeats, quick=args.quick, command=command,
+                      truth_spp=truth_spp,
                       echo=lambda line: print(line, file=sys.stderr))
     print(f"rival: table {table}")
     return 0

@@ -10,12 +10,16 @@ render at the scene's spp (time 1), the alternative's ladder, the default
 ``auto`` (planned anew, then taking that plan again), ``auto`` under time limits of
 :data:`LIMITS` of the full render (each warmed up once too, once the full
 render's median sets it), and each MRT configuration.  Errors are
-against converged renders (:data:`CONVERGED_SPP`): the film's own filter
-for the full render and the MRT, a box filter for the denoised renders.
-Then, at ``auto``'s own time, the alternative's error (interpolated on its
-curve) and the best configuration's in hindsight.  Beside the report's
-metric, the field's: relative MSE, and NVIDIA's FLIP where the
-``flip-evaluator`` package is installed (``pip install mitsuba-mrt[bench]``).
+against converged renders (:data:`CONVERGED_SPP`, kept in the output
+folder's :data:`CACHE_DIR` for the next run): the film's own filter for
+the full render and the MRT, a box filter for the denoised renders; their
+own error, the floor of every error measured against them, is reported
+beside.  Then, at ``auto``'s own time, the alternative's error
+(interpolated on its curve) and the best configuration's in hindsight.
+Beside the report's metric, the field's: relative MSE, NVIDIA's FLIP where
+the ``flip-evaluator`` package is installed (``pip install
+mitsuba-mrt[bench]``), and the MSE with the converged renders' own noise
+removed (:func:`noise_free_mse`).
 """
 
 from __future__ import annotations
@@ -30,7 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..imageio import OutputSet
+from ..errors import MRTError
+from ..imageio import OutputSet, atomic_path
 from ..recon.metrics import paper_error
 from ..recon.sampling import every_pixel
 from .experiments import check_repeats
@@ -51,9 +56,15 @@ CONFIGS = tuple((m, d) for d in ("none", "oidn") for m in ("fast", "refine", "id
 #: ``paper_fig1``'s ``-D`` values in this experiment (``--quick``: ``res`` 64).
 FIG1_DEFINES = {"res": 400, "integrator": "path", "spp": 64, "jitter": "true"}
 #: Samples per pixel of the converged renders errors are measured against
-#: (rendered as several passes of 64 averaged).
-CONVERGED_SPP = 512
+#: (rendered as several passes of 64 averaged): enough that their own error
+#: is well below the denoised images' (at 512 spp it was as large as theirs
+#: on ``cornell``, ``envmap_objects`` and ``materials``).
+CONVERGED_SPP = 4096
 QUICK_CONVERGED_SPP = 256
+#: The row of a scene's converged renders: their own error (film filter; box's as its ``chose``).
+CONVERGED = "converged"
+#: Where ``bench rival`` keeps its converged renders, within its output folder.
+CACHE_DIR = "cache"
 
 
 @dataclass
@@ -69,6 +80,7 @@ class Row:
     rel_mse: float
     chose: str = ""
     flip: float = math.nan
+    mse: float = math.nan  # (:func:`noise_free_mse`)
 
 
 def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
@@ -80,6 +92,23 @@ def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
     0.0
     """
     return float(np.mean((image - reference) ** 2 / (reference ** 2 + 0.01)))
+
+
+def noise_free_mse(image: np.ndarray, reference: np.ndarray, variance: np.ndarray) -> float:
+    """The squared error of the colours a display shows (clipped to [0, 1])
+    against the image a converged ``reference`` of per-pixel ``variance``
+    converges to: its squared error against the reference less the
+    reference's own (where the reference is within (0, 1): clipped beyond).
+
+    Examples
+    --------
+    >>> ref, var = np.full((1, 1, 3), 0.5), np.full((1, 1, 3), 0.01)
+    >>> round(noise_free_mse(np.full((1, 1, 3), 0.7), ref, var), 4)
+    0.03
+    """
+    inside = (reference > 0.0) & (reference < 1.0)
+    shown = np.clip(image, 0.0, 1.0) - np.clip(reference, 0.0, 1.0)
+    return float(np.mean(shown * shown) - np.mean(np.where(inside, variance, 0.0)))
 
 
 def flip_error(image: np.ndarray, reference: np.ndarray) -> float:
@@ -95,40 +124,108 @@ def flip_error(image: np.ndarray, reference: np.ndarray) -> float:
                                          computeMeanError=True)[1])
 
 
-def _converged(tracer, width: int, height: int, spp: int, box: bool) -> np.ndarray:
-    """The mean of passes of 64 spp over every pixel (box-filtered with ``box``)."""
+@dataclass(frozen=True)
+class Truth:
+    """A scene's converged renders, per filter (``"film"``: its film's, the
+    full render's and the MRT's; ``"box"``: the denoised renders'): each
+    the mean of passes of 64 spp (``truth["box"]``), the variance of that
+    mean per pixel and channel (the passes' spread over their number), and
+    its own error: the report's metric of the mean against the image it
+    converges to, half that between the means of its even and odd passes
+    (for noise symmetric about the image)."""
+
+    images: dict
+    variances: dict
+    own_errors: dict
+
+    def __getitem__(self, kind: str) -> np.ndarray:
+        return self.images[kind]
+
+
+def _converged(tracer, width: int, height: int, spp: int,
+               box: bool) -> tuple[np.ndarray, np.ndarray, float]:
+    """(the mean of passes of 64 spp over every pixel, box-filtered with
+    ``box``; the variance of that mean; its own error): see :class:`Truth`."""
     xy = every_pixel(width, height)
     passes = max(1, spp // 64)
     one = replace(tracer, spp=min(spp, 64))
-    total = sum(one(xy, stream=100 + k, aovs=False, replay=True, box=box).radiance
-                for k in range(passes))
-    return (total / passes).reshape(height, width, 3)
+    total = squares = 0.0
+    halves = [0.0, 0.0]
+    for k in range(passes):
+        x = one(xy, stream=100 + k, aovs=False, replay=True, box=box).radiance.astype(np.float64)
+        total, squares = total + x, squares + x * x
+        halves[k % 2] = halves[k % 2] + x
+    mean = total / passes
+    variance = (np.maximum(squares / passes - mean * mean, 0.0) / (passes - 1) if passes > 1
+                else np.zeros_like(mean))
+    own = (paper_error(halves[0] / (passes // 2), halves[1] / (passes // 2)) / 2
+           if passes > 1 and passes % 2 == 0 else math.nan)
+    shape = (height, width, 3)
+    return mean.reshape(shape), variance.reshape(shape), own
 
 
-def converged_truth(scene, spp: int = CONVERGED_SPP) -> dict:
-    """The scene's converged renders errors are measured against, at ``spp``:
-    ``"film"`` through its film's filter (the full render's and the MRT's),
-    ``"box"`` box-filtered (the denoised renders')."""
+def converged_truth(scene, spp: int = CONVERGED_SPP, cache: Path | None = None) -> Truth:
+    """The scene's converged renders errors are measured against, at ``spp``
+    (:class:`Truth`), kept in (and read back from) the file ``cache`` where given."""
     from ..renderer.api import GridTracer
     from ..renderer.scene import unwrap
 
     sensor = scene.sensors()[0]
     width, height = (int(v) for v in sensor.film().crop_size())
+    kept = _read_truth(cache, (height, width, 3))
+    if kept is not None:
+        return kept
     tracer = GridTracer(scene, sensor, unwrap(scene, None).nested,
                         int(sensor.sampler().sample_count()), 0)
-    return {"film": _converged(tracer, width, height, spp, False),
-            "box": _converged(tracer, width, height, spp, True)}
+    parts = {kind: _converged(tracer, width, height, spp, kind == "box")
+             for kind in ("film", "box")}
+    truth = Truth(*({kind: part[i] for kind, part in parts.items()} for i in range(3)))
+    if cache is not None:
+        Path(cache).parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(Path(cache)) as tmp, open(tmp, "wb") as f:
+            np.savez(f, **{f"{kind}_{field}": np.asarray(getattr(truth, f"{field}s")[kind])
+                           for kind in parts for field in ("image", "variance", "own_error")})
+    return truth
 
 
-def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool) -> list[Row]:
-    """Every method of the module on one scene, as :class:`Row` s."""
+def truth_file(folder: Path | None, name: str, scene, spp: int) -> Path | None:
+    """The file in ``folder`` (None: none) that keeps scene ``name``'s
+    converged renders at ``spp`` at its film's size."""
+    if folder is None:
+        return None
+    width, height = (int(v) for v in scene.sensors()[0].film().crop_size())
+    return Path(folder) / f"rival_{name}_{width}x{height}_{spp}.npz"
+
+
+def _read_truth(cache: Path | None, shape: tuple) -> Truth | None:
+    """The :class:`Truth` kept in ``cache`` if it is there, whole and of ``shape``."""
+    if cache is None or not Path(cache).is_file():
+        return None
+    try:
+        with np.load(cache) as f:
+            data = {key: f[key] for key in f.files}
+    except (OSError, ValueError):
+        return None
+    kinds = ("film", "box")
+    if not all(data.get(f"{k}_{x}", np.zeros(0)).shape == shape and np.isfinite(
+            data[f"{k}_{x}"]).all() for k in kinds for x in ("image", "variance")):
+        return None
+    return Truth({k: data[f"{k}_image"] for k in kinds}, {k: data[f"{k}_variance"] for k in kinds},
+                 {k: float(data.get(f"{k}_own_error", math.nan)) for k in kinds})
+
+
+def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool,
+                  truth_spp: int = CONVERGED_SPP, cache: Path | None = None) -> list[Row]:
+    """Every method of the module on one scene, as :class:`Row` s; its
+    converged renders at ``truth_spp`` (kept in the folder ``cache``)."""
     from ..renderer import kept_plans
     from ..renderer.api import render, render_denoised, render_reference
     from ..renderer.scene import load_scene
 
     scene = load_scene(path, **defines)
     spp = int(scene.sensors()[0].sampler().sample_count())
-    truth = converged_truth(scene, QUICK_CONVERGED_SPP if quick else CONVERGED_SPP)
+    truth_spp = QUICK_CONVERGED_SPP if quick else truth_spp
+    truth = converged_truth(scene, truth_spp, truth_file(cache, name, scene, truth_spp))
     ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
 
     def alternative(s, quality):
@@ -168,13 +265,15 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
             out = render(scene, mode="auto", time_limit=share * full_s, seed=seed)
             times[key].append(time.perf_counter() - begin)
             scores[key].append(_score(key, out, spp, truth))
-    rows = []
+    rows = [Row(name, CONVERGED, truth_spp, math.nan, math.nan, truth.own_errors["film"],
+                math.nan, f"{truth.own_errors['box']:.5f}")]
     for k, runs in scores.items():
         seconds = statistics.median(times[k])
         chose, spp_used = _most_common([(r.chose, r.spp) for r in runs])
-        error, mse, flip = (float(np.mean([getattr(r, m) for r in runs]))
-                            for m in ("error", "rel_mse", "flip"))
-        rows.append(Row(name, k, spp_used, seconds, seconds / full_s, error, mse, chose, flip))
+        error, relative, flip, mse = (float(np.mean([getattr(r, m) for r in runs]))
+                                      for m in ("error", "rel_mse", "flip", "mse"))
+        rows.append(Row(name, k, spp_used, seconds, seconds / full_s, error, relative, chose,
+                        flip, mse))
     return rows
 
 
@@ -186,23 +285,26 @@ class _Score(NamedTuple):
     flip: float
     chose: str
     spp: int
+    mse: float
 
 
-def _score(method: str, out, spp: int, truth: dict) -> _Score:
+def _score(method: str, out, spp: int, truth: Truth) -> _Score:
     """The :class:`_Score` of one render's ``out`` against ``truth`` (the
     converged renders, film and box filter)."""
     if isinstance(out, tuple):  # render_reference's, render_denoised's
         image, used = out[0], "full+oidn" if _alternative(method) else "full"
     else:
         image, used = out.image, out.mode_used
-    reference = truth["box" if used == "full+oidn" else "film"]
+    kind = "box" if used == "full+oidn" else "film"
+    reference = truth[kind]
     chose = ""
     if not isinstance(out, tuple) and out.auto is not None:
         chose = out.auto.choice.label
     spp_used = int(method.split("@")[1]) if _alternative(method) else (
         spp if method == "full" else int(out.spp))
     return _Score(paper_error(image, reference), rel_mse(image, reference),
-                  flip_error(image, reference), chose, spp_used)
+                  flip_error(image, reference), chose, spp_used,
+                  noise_free_mse(image, reference, truth.variances[kind]))
 
 
 def _most_common(choices: list[tuple[str, int]]) -> tuple[str, int]:
@@ -259,7 +361,8 @@ def verdicts(rows: list[Row]) -> list[dict]:
         planned = next((r for r in mine if r.method == PLANNED), None)
         planned_ratio = (math.nan if planned is None else
                          planned.error / alternative_at(mine, planned.relative_time))
-        field = {m: alternative_at(mine, auto.relative_time, m) for m in ("rel_mse", "flip")}
+        field = {m: alternative_at(mine, auto.relative_time, m)
+                 for m in ("rel_mse", "flip", "mse")}
         best = min((r.error for r in mine if r.relative_time <= auto.relative_time
                     and not r.method.startswith("auto")), default=float("nan"))
         limits = {}
@@ -293,16 +396,20 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
     with open(out.path("rival.csv"), "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(["scene", "method", "spp", "seconds", "relative_time", "error",
-                         "rel_mse", "flip", "chose"])
+                         "rel_mse", "flip", "mse", "chose"])
         for r in rows:
             writer.writerow([r.scene, r.method, r.spp, f"{r.seconds:.4f}",
                              f"{r.relative_time:.4f}", f"{r.error:.5f}", f"{r.rel_mse:.5f}",
-                             f"{r.flip:.5f}", r.chose])
+                             f"{r.flip:.5f}", f"{r.mse:.4g}", r.chose])
     lines = [f"Command: `{command}`", "",
              "| scene | auto chose | auto time | auto error | alternative at that time | "
-             "ratio | relMSE ratio | FLIP ratio | best in hindsight | planned anew: time, ratio | "
-             "limits 0.1 / 0.25 / 0.5: time / limit, error / alternative's best within |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+             "ratio | relMSE ratio | FLIP ratio | MSE ratio, noise removed | best in hindsight | "
+             "planned anew: time, ratio | "
+             "limits 0.1 / 0.25 / 0.5: time / limit, error / alternative's best within | "
+             "converged renders' own error, film / box |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|"]
+    floors = {r.scene: f"{r.error:.4f} / {float(r.chose):.4f} ({r.spp} spp)"
+              for r in rows if r.method == CONVERGED}
     for v in verdicts(rows):
         a = v["auto"]
         limits = "; ".join(f"{t:.2f}, {e / b:.2f}" if b == b else f"{t:.2f}, -"
@@ -310,7 +417,9 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
         lines.append(f"| {v['scene']} | {a.chose} | {a.relative_time:.2f} | {a.error:.4f} | "
                      f"{v['alternative']:.4f} | {a.error / v['alternative']:.2f} | "
                      f"{v['field_ratios']['rel_mse']:.2f} | {v['field_ratios']['flip']:.2f} | "
-                     f"{v['best']:.4f} | {_planned(v)} | {limits} |")
+                     f"{v['field_ratios']['mse']:.2f} | "
+                     f"{v['best']:.4f} | {_planned(v)} | {limits} | "
+                     f"{floors.get(v['scene'], '-')} |")
     Path(out.path("rival.md")).write_text("\n".join(lines) + "\n")
     scenes = list(dict.fromkeys(r.scene for r in rows))
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.0), squeeze=False)
@@ -324,6 +433,9 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
             if r.method.startswith("auto"):
                 marker = {"auto": "r*", PLANNED: "r+"}.get(r.method, "rx")
                 ax.plot(r.relative_time, r.error, marker)
+            elif r.method == CONVERGED:  # the errors' floor: the converged renders' own
+                for floor in (r.error, float(r.chose)):
+                    ax.axhline(floor, ls=":", lw=0.8, color="0.6")
             elif not _alternative(r.method):
                 ax.plot(r.relative_time, r.error, "b." if r.method != "full" else "ks")
         ax.set_xscale("log")
@@ -343,13 +455,32 @@ def _planned(verdict: dict) -> str:
     return "-" if row is None else f"{row.relative_time:.2f}, {verdict['planned_ratio']:.2f}"
 
 
+def check_truth_spp(spp) -> int:
+    """``spp`` (the converged renders' samples per pixel), refused where it is
+    not a multiple of 128 (an even number of passes of 64: their halves
+    tell the renders' own error).
+
+    Examples
+    --------
+    >>> check_truth_spp(1024)
+    1024
+    """
+    if int(spp) != spp or spp < 128 or spp % 128:
+        raise MRTError(f"--truth-spp must be a multiple of 128, got {spp}")
+    return int(spp)
+
+
 def run_rival(out_dir, scenes: list[tuple[str, str, dict]], repeats: int = 2,
-              quick: bool = False, command: str = "", echo=print) -> Path:
-    """Measure every (path, name, defines) of ``scenes``; write the report."""
+              quick: bool = False, command: str = "", echo=print,
+              truth_spp: int = CONVERGED_SPP) -> Path:
+    """Measure every (path, name, defines) of ``scenes``; write the report.
+    The converged renders (``truth_spp``) are kept in ``out_dir``'s
+    :data:`CACHE_DIR` and read back by the next run."""
     repeats = check_repeats(repeats)
     rows = []
     for path, name, defines in scenes:
         begin = time.perf_counter()
-        rows += measure_scene(path, name, defines, repeats, quick)
+        rows += measure_scene(path, name, defines, repeats, quick, truth_spp,
+                              Path(out_dir) / CACHE_DIR)
         echo(f"rival: {name} in {time.perf_counter() - begin:.0f} s")
     return write_report(Path(out_dir), rows, command)

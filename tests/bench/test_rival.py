@@ -71,6 +71,9 @@ def test_rival_writes_its_table_for_a_small_scene(tmp_path, variant, monkeypatch
     assert (tmp_path / "rival.png").stat().st_size > 0
     lines = (tmp_path / "rival.csv").read_text().splitlines()
     methods = {line.split(",")[1] for line in lines[1:]}
+    # the converged renders: their own error in the table, kept for the next run
+    assert "converged renders' own error" in text and "(256 spp) |" in text
+    assert list((tmp_path / "cache").glob("rival_cornell_32x32_256.npz"))
     assert lines[0].split(",")[7] == "flip"
     assert {"full", "oidn@1", "oidn@4", "oidn-high@4", "auto", PLANNED, "fast", "refine+oidn",
             "auto --time-limit 0.1"} <= methods
@@ -101,3 +104,56 @@ def test_without_flip_evaluator_flip_is_nan(monkeypatch):
 
     monkeypatch.setitem(sys.modules, "flip_evaluator", None)
     assert math.isnan(flip_error(np.zeros((4, 4, 3)), np.zeros((4, 4, 3))))
+
+
+def test_the_noise_free_mse_is_the_error_against_what_the_reference_converges_to():
+    import numpy as np
+
+    from mitsuba_mrt.bench.rival import noise_free_mse
+
+    rng = np.random.default_rng(1)
+    truth = 0.2 + 0.6 * rng.random((200, 200, 3))
+    image = truth + 0.05  # an error of its own
+    sigma = 0.06  # a noisy reference, its noise larger than the error
+    reference = truth + sigma * rng.standard_normal(truth.shape)
+    exact = float(np.mean((image - truth) ** 2))
+    assert noise_free_mse(image, reference, np.zeros(truth.shape)) > 2 * exact
+    assert noise_free_mse(image, reference, np.full(truth.shape, sigma ** 2)) == pytest.approx(
+        exact, rel=0.05)
+
+
+def test_converged_renders_know_their_own_noise_and_are_kept(tmp_path, variant, monkeypatch):
+    import numpy as np
+
+    import mitsuba_mrt
+    from mitsuba_mrt.bench import rival
+
+    scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / "cornell.xml", res=16)
+    cache = tmp_path / "cache" / "truth.npz"
+    truth = rival.converged_truth(scene, 256, cache)
+    for kind in ("film", "box"):
+        assert truth[kind].shape == truth.variances[kind].shape == (16, 16, 3)
+        assert (truth.variances[kind] >= 0).all() and truth.variances[kind].max() > 0
+        assert 0 < truth.own_errors[kind] < 0.5
+    assert cache.is_file()
+
+    def no_render(*args):
+        raise AssertionError("rendered again")
+    monkeypatch.setattr(rival, "_converged", no_render)
+    again = rival.converged_truth(scene, 256, cache)
+    assert np.array_equal(again["box"], truth["box"]) and again.own_errors == truth.own_errors
+    # a file of another image size is not taken
+    other = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / "cornell.xml", res=8)
+    with pytest.raises(AssertionError, match="rendered again"):
+        rival.converged_truth(other, 256, cache)
+
+
+def test_a_bad_truth_spp_is_one_line_and_exit_2(tmp_path):
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "mitsuba_mrt", "bench", "rival", "--truth-spp",
+                          "100", "-o", str(tmp_path / "out")], capture_output=True, text=True,
+                         cwd=ROOT)
+    assert out.returncode == 2 and not (tmp_path / "out").exists()
+    assert out.stderr.strip() == "error: --truth-spp must be a multiple of 128, got 100"
