@@ -9,11 +9,13 @@ filter, OIDN ``fast`` and ``high`` with guides of the same samples), and
 each ``--modes`` mode with its grid denoised, at ``sample_fraction`` 0.1
 times each ``--spread`` and ``--spp`` over it, so that every spread traces
 the same samples on its grid.  Methods alternate over ``--repeats`` seeds
-(times: medians; errors: means of the report's metric against the 512-spp
-renders ``bench rival`` uses).  Printed per method: its time over the full
+(times: medians; errors: means of the report's metric, and of the
+noise-free MSE, against the converged renders ``bench rival`` uses, read
+from or kept in ``--truths``).  Printed per method: its time over the full
 render's, its error, over the full render's, and over the alternative's at
 equal time (log-log interpolation on its lower curve), which is what
-``auto.SMALL_IMAGE_SPREAD`` was chosen by.
+``auto.SMALL_IMAGE_SPREAD`` was chosen by, and its MSE over the
+alternative's.
 """
 
 import argparse
@@ -60,13 +62,15 @@ def main():
     parser.add_argument("--spread", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--spp", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
+                        help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
 
     import time
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import converged_truth
+    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, noise_free_mse, truth_file
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.api import render, render_denoised, render_reference
 
@@ -74,7 +78,8 @@ def main():
     mitsuba_mrt.activate("auto")
     for name in args.scenes:
         scene = load(name, args.res)
-        truth = converged_truth(scene, 512)
+        truth = converged_truth(scene, CONVERGED_SPP,
+                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))
         methods = {"full": lambda seed: (render_reference(scene, seed=seed)[0], "film")}
         for quality in ("fast", "high"):
             for spp in LADDER:
@@ -90,6 +95,7 @@ def main():
                             seed=seed).image, "film"))
         times = {k: [] for k in methods}
         errors = {k: [] for k in methods}
+        squares = {k: [] for k in methods}
         for run in methods.values():  # warm-up: kernels recorded
             run(0)
         for seed in range(args.repeats):
@@ -98,9 +104,13 @@ def main():
                 image, reference = run(seed)
                 times[k].append(time.perf_counter() - begin)
                 errors[k].append(paper_error(image, truth[reference]))
+                squares[k].append(noise_free_mse(image, truth[reference],
+                                                 truth.variances[reference]))
         seconds = {k: statistics.median(v) for k, v in times.items()}
         error = {k: float(np.mean(v)) for k, v in errors.items()}
+        mse = {k: float(np.mean(v)) for k, v in squares.items()}
         curve = [(seconds[k], error[k]) for k in methods if k.startswith("alternative")]
+        mse_curve = [(seconds[k], mse[k]) for k in methods if k.startswith("alternative")]
         full = seconds["full"]
         print(f"{name} at {args.res} px: full render {full:.3f} s, error {error['full']:.5f}")
         for k in methods:
@@ -108,8 +118,8 @@ def main():
                 continue
             print(f"  {k:28s} time {seconds[k] / full:.3f}, error {error[k]:.5f}, "
                   f"{error[k] / error['full']:.2f}x the full render's, "
-                  f"{error[k] / at_equal_time(curve, seconds[k]):.3f}x the alternative's",
-                  flush=True)
+                  f"{error[k] / at_equal_time(curve, seconds[k]):.3f}x the alternative's; "
+                  f"MSE {mse[k] / at_equal_time(mse_curve, seconds[k]):.3f}x", flush=True)
 
 
 if __name__ == "__main__":
