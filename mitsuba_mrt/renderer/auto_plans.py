@@ -25,8 +25,8 @@ from ..recon.sampling import every_pixel
 from ..types import MRTParams, SeedStream, SparseTrace
 from .held_out import HeldOut
 from .progressive import Progress
-from .scene_query import (environment_map, has_mirrors, lit_diffuse_by_points,
-                          textured_diffuse_shapes, transmits)
+from .scene_query import (environment_map, lit_diffuse_by_points, textured_diffuse_shapes,
+                          transmits)
 from .trace import trace_shapes
 
 #: The plan, under the default target, where every surface is diffuse and
@@ -68,24 +68,21 @@ EDGE_TESTED = (WIDE_REASON, TEXTURED_REASON)
 #: px: ``instanced``, 5.5 %, is the one gallery scene where ``idpass+oidn``
 #: is no better than the passes; the others have 1.1-3.6 %).
 WIDE_EDGE_SHARE = 0.045
-#: The plan, under the same conditions, where an environment map lights the
-#: scene: mode ``refine``, OIDN on its grid.  Light from every direction
-#: shades the inside of a shape slowly, which the grid holds; where it does
-#: not, at the shapes' edges and their reflections of the map, ``refine``
-#: traces the pixels (``bench rival``: 0.76-0.91x the alternative's error
-#: on the gallery's two such scenes at 256 and 512 px, where ``idpass+oidn``
-#: is 1.07-1.72x and the passes about 1.0x).
+#: The same share on a smaller image (:data:`TEXTURED_REASON`), whose grid is
+#: coarser beside the scene (``bench rival`` at 256 px against converged
+#: renders of 4096 spp: ``idpass+oidn`` at 0.70x and 0.93x the alternative's
+#: error with 2.2 % and 2.4 % of the pixels at an edge, 1.18x with 3.1 %).
+SMALL_EDGE_SHARE = 0.027
+#: The plan, on images of :data:`WIDE_PIXELS` or more, where an environment
+#: map lights the scene: mode ``refine``, OIDN on its grid.  Light from every
+#: direction shades the inside of a shape slowly, which the grid holds; where
+#: it does not, at the shapes' edges and their reflections of the map,
+#: ``refine`` traces the pixels.  On smaller images, as under mirrors or
+#: glass there, the passes (``bench rival`` at 256 px against converged
+#: renders of 4096 spp: ``refine+oidn`` 1.07-1.14x the alternative's error on
+#: ``envmap_objects``, ``materials`` and ``cornell``).
 SKY = Candidate("refine+oidn", "mrt", 0, mode="refine", denoise=True)
 SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid"
-#: :data:`SKY` on a smaller image without an environment map where a surface
-#: mirrors or transmits light (:func:`~.scene_query.has_mirrors`,
-#: :func:`~.scene_query.transmits`) and none is a textured diffuse one: what
-#: they show is an image of the scene that no id tells apart, which ``refine``
-#: traces at its edges, and without textures the passes cannot denoise the
-#: shading alone, so they need most of the scene's spp to meet a full
-#: render's noise (``bench rival`` at 256 px: ``cornell``, the passes at
-#: 0.6 of a full render's time; with textures, ``room``, they meet it at 0.2).
-SPECULAR_REASON = "mirrors or glass, no texture: the MRT's refined edges, denoised grid"
 #: :data:`HOME`'s and :data:`SKY`'s image is kept where its held-out check estimates its RMS
 #: error at most this many times a full render's noise (the default target);
 #: else the passes render the image.  The RMS error weighs the MRT's few
@@ -93,12 +90,11 @@ SPECULAR_REASON = "mirrors or glass, no texture: the MRT's refined edges, denois
 #: bench's scenes where that image meets the target by the report's metric,
 #: the check's estimate is 0.5-1.3 times the noise.
 CHECK_SLACK = 1.5
-#: :data:`SKY`'s plans, and :data:`HOME`'s on scenes other than the report's
-#: kind, on images of fewer than :data:`WIDE_PIXELS`: the grid spreads the
-#: same samples over this many times the pixels (``sample_fraction``), at
-#: that share of the spp.  There the default grid's spacing is coarse beside
-#: the scene's detail, and ``refine`` traces its edges' pixels at the grid's
-#: spp (``examples/grid_spread.py``).
+#: :data:`HOME`'s plan on scenes other than the report's kind, on images of
+#: fewer than :data:`WIDE_PIXELS` (:data:`TEXTURED_REASON`): the grid spreads
+#: the same samples over this many times the pixels (``sample_fraction``),
+#: at that share of the spp.  There the default grid's spacing is coarse
+#: beside the scene's detail (``examples/grid_spread.py``).
 SMALL_IMAGE_SPREAD = 2
 
 
@@ -142,15 +138,11 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
     :data:`SKY`), with its reason, or None: the passes."""
     if lit_diffuse_by_points(scene):
         return HOME, HOME_REASON
-    if environment_map(scene):
-        return SKY, SKY_REASON
     if pixels >= WIDE_PIXELS:
-        return HOME, WIDE_REASON
-    textured = textured_diffuse_shapes(scene).any()
-    if textured and not transmits(scene):
+        return (SKY, SKY_REASON) if environment_map(scene) else (HOME, WIDE_REASON)
+    if (not environment_map(scene) and not transmits(scene)
+            and textured_diffuse_shapes(scene).any()):
         return HOME, TEXTURED_REASON
-    if not textured and (has_mirrors(scene) or transmits(scene)):
-        return SKY, SPECULAR_REASON
     return None
 
 
@@ -185,8 +177,8 @@ def spread(chosen: Candidate, reason: str, spp: int, fraction: float,
 
     Examples
     --------
-    >>> spread(SKY, SKY_REASON, 64, 0.1, 256 * 256).label
-    'refine+oidn @ 32 spp, grid of 20 % of the pixels'
+    >>> spread(HOME, TEXTURED_REASON, 64, 0.1, 256 * 256).label
+    'idpass+oidn @ 32 spp, grid of 20 % of the pixels'
     >>> spread(HOME, HOME_REASON, 64, 0.1, 256 * 256).label
     'idpass+oidn @ 64 spp'
     """
@@ -214,13 +206,15 @@ def edge_tested(scene, tracer, params: MRTParams, width: int, height: int,
 
 
 def _too_many_edges(ids: np.ndarray, width: int, height: int, notes: list) -> bool:
-    """Whether more than :data:`WIDE_EDGE_SHARE` of the pixels lie at an edge
+    """Whether more than :data:`WIDE_EDGE_SHARE` (:data:`SMALL_EDGE_SHARE` on
+    an image of fewer than :data:`WIDE_PIXELS`) of the pixels lie at an edge
     between ``ids`` (the pixels'; a note says so where they do)."""
     share = edge_share(ids.reshape(height, width))
-    if share > WIDE_EDGE_SHARE:
+    most = WIDE_EDGE_SHARE if width * height >= WIDE_PIXELS else SMALL_EDGE_SHARE
+    if share > most:
         notes.append(f"{share:.1%} of the pixels at an edge between ids: "
                      f"too many for the MRT's grid")
-    return share > WIDE_EDGE_SHARE
+    return share > most
 
 
 def find_surfaces(scene, tracer, width: int, height: int,

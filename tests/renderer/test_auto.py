@@ -425,18 +425,22 @@ def test_an_environment_map_takes_the_checked_refined_edges_a_small_image_the_pa
     from mitsuba_mrt.renderer.scene_query import environment_map
 
     sky = ROOT / "scenes_xml" / "gallery" / "envmaps" / "sky.exr"
-    lit = scene_xml(256, spp=32).replace(
-        "</sensor>", f'</sensor><emitter type="envmap"><string name="filename" value="{sky}"/>'
-                     '</emitter>')
+
+    def lit(res):
+        return mi.load_string(scene_xml(res, spp=32).replace(
+            "</sensor>", f'</sensor><emitter type="envmap"><string name="filename" '
+                         f'value="{sky}"/></emitter>'))
     constant = scene_xml(256, spp=16).replace(
         "</sensor>", '</sensor><emitter type="constant"/>')
-    assert environment_map(mi.load_string(lit))
+    assert environment_map(lit(256))
     assert not environment_map(mi.load_string(constant))
     assert not environment_map(mi.load_string(scene_xml(256, spp=16)))
-    result = mitsuba_mrt.render(mi.load_string(lit))
+    result = mitsuba_mrt.render(lit(512))
     assert result.auto.reason == auto_plans.SKY_REASON and result.mode_used == "refine"
     assert result.params.denoise == "oidn" and result.auto.choice.error is not None
-    assert mitsuba_mrt.render(mi.load_string(scene_xml(256, spp=64))).auto.passes
+    assert result.auto.choice.label == "refine+oidn @ 32 spp"  # (the scene's grid and spp)
+    assert auto_plans.unmeasured_plan(lit(256), 256 * 256) is None
+    assert mitsuba_mrt.render(lit(256)).auto.passes
 
 
 def test_no_noise_probe_where_the_integrator_samples_an_area_light(scene, monkeypatch):
@@ -746,6 +750,14 @@ def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_lig
     assert result.mode_used == "idpass" and result.auto.reason == auto_plans.TEXTURED_REASON
     assert result.auto.choice.label == "idpass+oidn @ 16 spp, grid of 20 % of the pixels"
     assert not result.auto.notes and np.isfinite(result.image).all()
+    # below 512 x 512 the grid is twice as dense, at half the spp: the image is
+    # the mode's own at that grid and spp (same seed), and the kept plan keeps its grid
+    same = mitsuba_mrt.render(checker, mode="idpass", denoise="oidn", spp=16, sample_fraction=0.2)
+    assert result.traced.grid == grid_pattern(256, 256, 0.2).count
+    assert np.array_equal(result.image, same.image)
+    again = mitsuba_mrt.render(checker)
+    assert again.auto.passes == [] and again.auto.choice.fraction == 0.2
+    assert np.array_equal(again.image, same.image)
     # the room's glass shows what lies behind it, which no id tells apart
     room = mitsuba_mrt.load_scene(gallery / "room.xml", res=128)
     assert transmits(room) and auto_plans.unmeasured_plan(room, 128 * 128) is None
@@ -753,29 +765,29 @@ def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_lig
     assert auto_plans.unmeasured_plan(room, 512 * 512) == (auto_plans.HOME, auto_plans.WIDE_REASON)
 
 
-def test_a_small_untextured_image_with_mirrors_or_glass_takes_the_refined_edges(variant):
+def test_a_small_textured_image_with_many_edges_between_ids_takes_the_passes(variant,
+                                                                          monkeypatch):
+    checker = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/checker_border.xml", res=256,
+                                     spp=32)
+    monkeypatch.setattr(auto_plans, "WIDE_EDGE_SHARE", 0.0)  # (not the small images' share)
+    assert mitsuba_mrt.render(checker).mode_used == "idpass"
+    kept_plans.clear()
+    monkeypatch.setattr(auto_plans, "SMALL_EDGE_SHARE", 0.0)
+    result = mitsuba_mrt.render(checker)
+    assert result.mode_used == "full+oidn" and result.auto.passes
+    assert any("of the pixels at an edge between ids" in n for n in result.auto.notes)
+
+
+def test_a_small_image_with_mirrors_or_glass_and_no_texture_takes_the_passes(variant):
     from mitsuba_mrt.renderer.scene_query import has_mirrors, textured_diffuse_shapes, transmits
 
     gallery = ROOT / "scenes_xml/gallery"
     box = mitsuba_mrt.load_scene(gallery / "cornell.xml", res=192, spp=64)
     assert has_mirrors(box) and transmits(box) and not textured_diffuse_shapes(box).any()
-    assert auto_plans.unmeasured_plan(box, 192 * 192) == (auto_plans.SKY,
-                                                          auto_plans.SPECULAR_REASON)
-    result = mitsuba_mrt.render(box)
-    assert result.auto.reason == auto_plans.SPECULAR_REASON and result.mode_used == "refine"
-    assert result.params.denoise == "oidn" and np.isfinite(result.image).all()
-    # below 512 x 512 the grid is twice as dense, at half the spp: the image is
-    # the mode's own at that grid and spp (same seed)
-    assert result.auto.choice.label == "refine+oidn @ 32 spp, grid of 20 % of the pixels"
-    assert result.spp == 32 and result.traced.grid == grid_pattern(192, 192, 0.2).count
-    same = mitsuba_mrt.render(box, mode="refine", denoise="oidn", spp=32, sample_fraction=0.2)
-    assert np.array_equal(result.image, same.image)
-    again = mitsuba_mrt.render(box)  # the kept plan, its grid with it
-    assert again.auto.reason.startswith(auto_plans.SPECULAR_REASON) and again.auto.passes == []
-    assert again.auto.choice.fraction == 0.2 and np.array_equal(again.image, same.image)
+    assert auto_plans.unmeasured_plan(box, 192 * 192) is None
     # from 512 x 512 on the id pass, as on any scene without an environment map
     assert auto_plans.unmeasured_plan(box, 512 * 512) == (auto_plans.HOME, auto_plans.WIDE_REASON)
-    # neither mirrors nor glass: the passes
+    # neither mirrors nor glass: the passes too
     plain = mitsuba_mrt.load_scene(gallery / "instanced.xml", res=64)
     assert not (has_mirrors(plain) or transmits(plain))
     assert auto_plans.unmeasured_plan(plain, 64 * 64) is None
