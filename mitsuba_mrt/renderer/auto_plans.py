@@ -42,13 +42,17 @@ HOME_REASON = "diffuse surfaces lit by point lights alone: the MRT's id pass, de
 HOME_MIN_SPP = 16
 #: :data:`HOME` on other scenes, under the same conditions: images of at least
 #: this many pixels (512 x 512) lit by no environment map
-#: (:func:`~.scene_query.environment_map`).  There the grid resolves the
-#: shading the ids do not hold, and the id pass's albedo the textures that
+#: (:func:`~.scene_query.environment_map`) where no surface transmits light
+#: (:func:`~.scene_query.transmits`: glass shows the scene behind it, which no
+#: id tells apart; ``bench rival`` at 512 px: ``idpass+oidn`` 1.10-1.12x the
+#: alternative's error on ``cornell`` and ``room``).  There the grid resolves
+#: the shading the ids do not hold, and the id pass's albedo the textures that
 #: OIDN blurs; on smaller images the grid's spacing is coarse beside the
 #: scene's detail (``bench rival`` at 256 px: ``idpass+oidn`` behind the
 #: alternative on five of nine gallery scenes).
 WIDE_PIXELS = 1 << 18
-WIDE_REASON = "512 x 512 pixels or more, no environment map: the MRT's id pass, denoised grid"
+WIDE_REASON = ("512 x 512 pixels or more, no environment map, no glass: the MRT's id pass, "
+               "denoised grid")
 #: :data:`HOME` on a smaller image where a diffuse surface is textured
 #: (:func:`~.scene_query.textured_diffuse_shapes`) and no surface transmits
 #: light (:func:`~.scene_query.transmits`): the id pass gives the texture at
@@ -138,8 +142,10 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
     :data:`SKY`), with its reason, or None: the passes."""
     if lit_diffuse_by_points(scene):
         return HOME, HOME_REASON
-    if pixels >= WIDE_PIXELS:
-        return (SKY, SKY_REASON) if environment_map(scene) else (HOME, WIDE_REASON)
+    if pixels >= WIDE_PIXELS and environment_map(scene):
+        return SKY, SKY_REASON
+    if pixels >= WIDE_PIXELS and not transmits(scene):
+        return HOME, WIDE_REASON
     if (not environment_map(scene) and not transmits(scene)
             and textured_diffuse_shapes(scene).any()):
         return HOME, TEXTURED_REASON
