@@ -259,7 +259,7 @@ class LaunchCost:
         if per_spp <= 0:
             return 0
         launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
-                    if min(fixed + per_spp * spp, self._replay_of(spp)) <= seconds]
+                    if self(spp) <= seconds]  # (none of them new: no recording added)
         anew = [] if self.spp_compiles and self.launches else [
             int((seconds - self.record_s - fixed) // per_spp)]
         return max(launched + anew + [0])
