@@ -44,8 +44,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..recon.denoise import (CLEAN_TEXTURE_SPP, denoise_image, denoise_shading,
-                             expected_seconds, preset, texture_seconds, textured_pixels)
+from ..recon.denoise import (CLEAN_TEXTURE_SPP, denoise_image, denoise_seconds,
+                             denoise_shading, expected_seconds, preset, texture_seconds,
+                             textured_pixels)
 from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..runtime.jit import kernel_seconds
@@ -82,9 +83,9 @@ MIN_SPP_MET = 4
 ESTIMATE_STRIPS, ESTIMATE_PIXELS = 4, 1 << 14
 #: OIDN's ``high`` preset against ``fast``, on these images: how much longer
 #: its call takes (2 cores, 256-512 px), and the share of ``fast``'s error it
-#: leaves (the median of ``bench rival``'s ``oidn-high@`` over ``oidn@``
-#: errors at 8-32 spp, 256 and 512 px).
-HIGH_COST, HIGH_GAIN = 1.9, 0.96
+#: leaves at the same spp (the median of ``bench rival``'s ``oidn-high@`` over
+#: ``oidn@`` errors at 8-64 spp, 256 and 512 px, against its converged renders).
+HIGH_COST, HIGH_GAIN = 1.9, 0.93
 #: Each pass's radiance is clipped at this for the estimates, as a display
 #: (and the report's metric) clips: a bright sample's excess is noise the
 #: estimates cannot average out.
@@ -463,11 +464,16 @@ def _oidn_s(quality: str, fast_s: float, pixels: int) -> float:
 def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: float,
                   time_left: float | None, pixels: int) -> str:
     """``quality``, or for ``auto`` :func:`final_quality`'s choice for an
-    image of ``pixels``."""
+    image of ``pixels``.  Before any ``high`` call in the process, and with
+    no time limit to keep, ``high``'s call is weighed as :data:`HIGH_COST`
+    times ``fast``'s, not at its prior (a time limit's margin: twice a call's
+    time, which would leave ``high`` unchosen where it pays)."""
     if quality != "auto":
         return quality
-    return final_quality(trace_s, fast_s, rate_of(progress.history), time_left,
-                         expected_seconds(pixels, "high"))
+    high_s = expected_seconds(pixels, "high")
+    if time_left is None and denoise_seconds(pixels, "high") is None:
+        high_s = None
+    return final_quality(trace_s, fast_s, rate_of(progress.history), time_left, high_s)
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,

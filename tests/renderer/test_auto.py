@@ -668,6 +668,18 @@ def test_high_pays_where_its_extra_time_is_small_beside_the_passes():
     assert final_quality(10.0, 0.0, rate) == "fast"  # OIDN's cost unknown
 
 
+def test_before_any_high_call_high_is_weighed_by_fasts_measured_call(variant):
+    from mitsuba_mrt.recon import denoise
+    from mitsuba_mrt.renderer.progressive import Progress, _final_preset
+
+    denoise.release()  # (no call at any preset measured)
+    pixels, fast_s = 4096 * 4096, 0.01  # high's prior: seconds; HIGH_COST times fast's: 0.019
+    assert _final_preset("auto", Progress(), 1.0, fast_s, None, pixels) == "high"
+    # under a time limit the prior's margin is kept
+    assert _final_preset("auto", Progress(), 1.0, fast_s, 100.0, pixels) == "fast"
+    assert _final_preset("balanced", Progress(), 1.0, fast_s, None, pixels) == "balanced"
+
+
 def test_textured_diffuse_surfaces_are_denoised_as_their_shading(variant):
     from mitsuba_mrt.renderer.scene_query import ordered_shapes, textured_diffuse_shapes
 
