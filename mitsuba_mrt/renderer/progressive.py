@@ -83,9 +83,11 @@ MIN_SPP_MET = 4
 ESTIMATE_STRIPS, ESTIMATE_PIXELS = 4, 1 << 14
 #: OIDN's ``high`` preset against ``fast``, on these images: how much longer
 #: its call takes (2 cores, 256-512 px), and the share of ``fast``'s error it
-#: leaves at the same spp (the median of ``bench rival``'s ``oidn-high@`` over
-#: ``oidn@`` errors at 8-64 spp, 256 and 512 px, against its converged renders).
-HIGH_COST, HIGH_GAIN = 1.9, 0.93
+#: leaves in :func:`final_quality`'s rule: the value whose choices lose least
+#: at equal time on ``bench rival``'s curves (256 and 512 px, and fresh
+#: processes': 0.2-1.3 % of the error at 2-32 spp; 0.93, the median share at
+#: equal spp from 8 spp on, lost 8-15 % at 2-4 spp, where ``high`` gains less).
+HIGH_COST, HIGH_GAIN = 1.9, 0.96
 #: Each pass's radiance is clipped at this for the estimates, as a display
 #: (and the report's metric) clips: a bright sample's excess is noise the
 #: estimates cannot average out.
@@ -467,13 +469,17 @@ def _final_preset(quality: str, progress: Progress, trace_s: float, fast_s: floa
     image of ``pixels``.  Before any ``high`` call in the process, and with
     no time limit to keep, ``high``'s call is weighed as :data:`HIGH_COST`
     times ``fast``'s, not at its prior (a time limit's margin: twice a call's
-    time, which would leave ``high`` unchosen where it pays)."""
+    time, which would leave ``high`` unchosen where it pays).  More passes'
+    error is taken to fall at :data:`DEFAULT_RATE`, as the alternative's
+    curves fall from 8 to 32 spp, not at the rounds' rate: measured between
+    half-spp estimates, that is steeper (``materials`` and
+    ``envmap_objects`` at 256 px: 0.33 and 0.46 against 0.17-0.19)."""
     if quality != "auto":
         return quality
     high_s = expected_seconds(pixels, "high")
     if time_left is None and denoise_seconds(pixels, "high") is None:
         high_s = None
-    return final_quality(trace_s, fast_s, rate_of(progress.history), time_left, high_s)
+    return final_quality(trace_s, fast_s, DEFAULT_RATE, time_left, high_s)
 
 
 def _fill(passes: Passes, progress: Progress, tracer, xy: np.ndarray, until: float,
