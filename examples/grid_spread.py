@@ -14,7 +14,7 @@ noise-free MSE, against the converged renders ``bench rival`` uses, read
 from or kept in ``--truths``).  Printed per method: its time over the full
 render's, its error, over the full render's, and over the alternative's at
 equal time (log-log interpolation on its lower curve), which is what
-``auto.SMALL_IMAGE_SPREAD`` was chosen by, and its MSE over the
+``auto_plans.SMALL_IMAGE_SPREAD`` was chosen by, and its MSE over the
 alternative's.
 """
 

@@ -69,8 +69,10 @@ EDGE_TESTED = (WIDE_REASON, TEXTURED_REASON)
 #: (:func:`~mitsuba_mrt.recon.ids.edge_share` of the id pass, which
 #: ``idpass`` then reuses): where more do, the regions are small beside the
 #: grid's spacing and hold few of its samples each (``bench rival`` at 512
-#: px: ``instanced``, 5.5 %, is the one gallery scene where ``idpass+oidn``
-#: is no better than the passes; the others have 1.1-3.6 %).
+#: px against converged renders of 2048 spp: of the gallery scenes without
+#: glass or an environment map, ``instanced``, 5.5 %, is the one where
+#: ``idpass+oidn`` is no better than the alternative, 1.02x; the others have
+#: 1.1-3.6 % and 0.61-0.96x).
 WIDE_EDGE_SHARE = 0.045
 #: The same share on a smaller image (:data:`TEXTURED_REASON`), whose grid is
 #: coarser beside the scene (``bench rival`` at 256 px against converged
@@ -90,9 +92,9 @@ SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid
 #: :data:`HOME`'s and :data:`SKY`'s image is kept where its held-out check estimates its RMS
 #: error at most this many times a full render's noise (the default target);
 #: else the passes render the image.  The RMS error weighs the MRT's few
-#: pixels at edges more than the report's mean absolute error does: on the
-#: bench's scenes where that image meets the target by the report's metric,
-#: the check's estimate is 0.5-1.3 times the noise.
+#: pixels at edges more than the report's mean absolute error does, so an
+#: image that meets the target by the report's metric may have an RMS error
+#: above the noise (``examples/held_out_check.py``).
 CHECK_SLACK = 1.5
 #: :data:`HOME`'s plan on scenes other than the report's kind, on images of
 #: fewer than :data:`WIDE_PIXELS` (:data:`TEXTURED_REASON`): the grid spreads

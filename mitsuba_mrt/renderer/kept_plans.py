@@ -40,12 +40,11 @@ KEPT_PLANS = 16
 #: Renders kept per spp: a plan is expected to take their median.
 PLAN_CALLS = 3
 #: Under a time limit a kept plan renders from this share of its checked spp,
-#: per mode, up to :data:`MOST_SPP_FACTOR` times it (``bench rival``'s scenes
-#: at 256 px: ``idpass+oidn`` at 8-128 spp of 64 had 0.66-1.06 times the
-#: alternative's error at equal time, level over the range on each scene;
-#: ``refine+oidn`` traces its edges' pixels at the spp, not denoised: 0.92-0.98
-#: at 16-32 spp on ``cornell``, and at 10 spp on ``envmap_objects`` 1.21 times
-#: the alternative's best within a limit of a quarter of the full render).
+#: per mode, up to :data:`MOST_SPP_FACTOR` times it: ``idpass+oidn`` denoises
+#: its grid, so fewer spp cost it about what they cost the alternative;
+#: ``refine+oidn`` traces its edges' pixels at the spp, not denoised, and
+#: falls behind sooner (``bench rival``'s time limits run these plans at such
+#: spp: docs/BENCHMARKS.md).
 LEAST_SPP_SHARE = {"idpass": 1 / 8, "refine": 1 / 4}
 MOST_SPP_FACTOR = 4
 #: The share of the growing traces' time that does not shrink with fewer
