@@ -2,8 +2,9 @@
 
     python examples/auto_choices.py checker_border spot_textures two_sensors room crop_rgba --res 256
 
-Per gallery scene (its 64 spp), warm, in this process, against a 512-spp
-render with a box pixel filter (the report's metric), three ``auto`` renders
+Per gallery scene (its 64 spp), warm, in this process, against the
+box-filtered converged renders ``bench rival`` uses (the report's metric;
+read from or kept in ``--truths``), three ``auto`` renders
 of the default target alternate ``--repeats`` times:
 
 - ``plain``: OIDN ``fast`` on every pixel (``denoise_quality="fast"``, the
@@ -30,11 +31,14 @@ def main():
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
+                        help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import converged_truth
+    from mitsuba_mrt.bench.experiments import gallery_defines
+    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer import progressive
 
@@ -42,11 +46,10 @@ def main():
     mitsuba_mrt.activate("auto")
     methods = {"plain": (False, "fast"), "+shading": (True, "fast"), "+high": (True, "auto")}
     for name in args.scenes:
-        defines = {"res": args.res}
-        if name == "crop_rgba":  # its film holds the crop window
-            defines["film_res"] = args.res + 176
-        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml", **defines)
-        truth = converged_truth(scene, 512)["box"]
+        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
+                                       **gallery_defines(name, args.res))
+        truth = converged_truth(scene, CONVERGED_SPP,
+                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))["box"]
 
         def run(shading, quality):
             progressive.SHADING = shading

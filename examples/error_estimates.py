@@ -11,8 +11,9 @@ noise while large ones (an edge the MRT misses) are counted in full.  This
 script prints, per gallery scene at 256 x 256 and candidate (the full render,
 the usual alternative at 4-32 spp, the MRT modes with OIDN):
 
-- ``true L1``: the report's metric against a 512-spp render (the film's
-  filter for the full render and the MRT, a box filter for denoised renders);
+- ``true L1``: the report's metric against ``bench rival``'s converged renders
+  (read from or kept in ``--truths``; the film's filter for the full render
+  and the MRT, a box filter for denoised renders);
 - ``naive``: the mean absolute difference to the reference, less its noise's;
 - ``two-part``: each pixel's difference beyond 3 sigma of the reference's
   noise counted as it is, the others' squared error (less the noise) summed
@@ -58,9 +59,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--ref-spp", type=int, default=8)
+    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
+                        help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
     import mitsuba_mrt
-    from mitsuba_mrt.bench.rival import converged_truth
+    from mitsuba_mrt.bench.experiments import gallery_defines
+    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel, grid_pattern
     from mitsuba_mrt.renderer import pilot
@@ -72,13 +76,16 @@ def main():
     mitsuba_mrt.activate("auto")
     print("scene candidate true-L1 naive two-part RMS-est true-RMS")
     for name in args.scenes:
-        scene = load_scene(str(ROOT / "scenes_xml" / "gallery" / f"{name}.xml"), res=256)
+        scene = load_scene(str(ROOT / "scenes_xml" / "gallery" / f"{name}.xml"),
+                           **gallery_defines(name, 256))
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
         spp = int(sensor.sampler().sample_count())
         tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, spp, 0)
         xy = every_pixel(width, height)
-        truth, refs = converged_truth(scene, 512), {}
+        truth = converged_truth(scene, CONVERGED_SPP,
+                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))
+        refs = {}
         for kind in ("film", "box"):
             one = replace(tracer, spp=args.ref_spp)
             # the last pixel apart: a trace of every pixel would splat the film's filter

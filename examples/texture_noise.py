@@ -8,8 +8,8 @@ denoised three ways: OIDN ``fast`` on the colour (``plain``), the textured
 diffuse surfaces as their shading multiplied back by the samples' own
 albedo (``shading``), and by the albedo denoised too (``+clean``,
 :func:`mitsuba_mrt.recon.denoise.denoise_shading`'s ``clean_texture``).
-Printed: each one's mean error (the report's metric, against a
-``--ref-spp`` render with a box pixel filter).  ``auto``'s passes clean the
+Printed: each one's mean error (the report's metric, against the box-filtered
+converged renders ``bench rival`` uses, read from or kept in ``--truths``).  ``auto``'s passes clean the
 texture at up to :data:`~mitsuba_mrt.recon.denoise.CLEAN_TEXTURE_SPP` spp.
 """
 
@@ -26,13 +26,14 @@ def main():
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--ref-spp", type=int, default=256)
+    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
+                        help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
     from mitsuba_mrt.bench.experiments import gallery_defines
-    from mitsuba_mrt.bench.rival import converged_truth
+    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
     from mitsuba_mrt.recon.denoise import denoise_image, denoise_shading, textured_pixels
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel
@@ -46,7 +47,8 @@ def main():
     for name in args.scenes:
         scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
                                        **gallery_defines(name, args.res))
-        truth = converged_truth(scene, args.ref_spp)["box"]
+        truth = converged_truth(scene, CONVERGED_SPP,
+                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))["box"]
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
         xy = every_pixel(width, height)
