@@ -364,8 +364,8 @@ def final_quality(trace_s: float, fast_s: float, rate: float,
 
     ``trace_s`` is the passes' tracing time; ``fast_s`` and ``high_s`` what
     the call takes at either preset (``high_s`` None: :data:`HIGH_COST` times
-    ``fast_s``); more passes' error falls as ``spp ** -rate``
-    (:func:`rate_of`), ``high``'s is :data:`HIGH_GAIN` of ``fast``'s.
+    ``fast_s``); more passes' error falls as ``spp ** -rate``,
+    ``high``'s is :data:`HIGH_GAIN` of ``fast``'s.
 
     Examples
     --------
