@@ -126,11 +126,16 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
 
 
 #: Seconds a call of :func:`denoise_image` takes per pixel and worker thread,
-#: with both guides, before any call in the process has measured it: about
-#: twice a warm call on a 2-core x86 CPU (256-512 px), as a fresh process's
-#: first call took 1.4-3.2 times one, so that a first time-limited render
+#: with both guides, before any call in the process has measured it: a warm
+#: call's on a 2-core x86 CPU (32-512 px a side); and the part of a process's
+#: first call that does not grow with the pixels (OIDN's import, its device,
+#: the filter's weights), which makes a small image's first call 2-5 times a
+#: warm one and a large image's 1.2-1.35 times.  With
+#: :data:`FIRST_CALL_SHARE` on both, a first call takes 0.48-0.89 of what
+#: they say (fresh processes, 32-512 px), so that a first time-limited render
 #: plans for a call no faster than it will be.
-PRIOR_SECONDS = {"fast": 1.45e-6, "balanced": 2.8e-6, "high": 2.8e-6}
+PRIOR_SECONDS = {"fast": 0.95e-6, "balanced": 1.8e-6, "high": 1.8e-6}
+PRIOR_FIXED = {"fast": 0.006, "balanced": 0.01, "high": 0.01}
 #: The first call on an image size at a preset takes this share longer than
 #: the next ones (OIDN makes that filter's buffers as it runs): 0.25-0.35 on
 #: 2 cores at 256-512 px.
@@ -141,15 +146,16 @@ def expected_seconds(pixels: int, quality: str) -> float:
     """What the next call on ``pixels`` pixels at ``quality`` is expected to
     take: the recent calls' on that many pixels; else :func:`denoise_seconds`
     (from other sizes), or before any call at ``quality`` in this process
-    :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
-    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
+    :data:`PRIOR_FIXED` and :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's
+    worker threads (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
     seconds = denoise_seconds(pixels, quality)
     if pixels in _state.get("recent", {}).get(quality, {}):
         return seconds
     if seconds is None:
         import drjit as dr
 
-        seconds = PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1)
+        seconds = (PRIOR_FIXED[quality]
+                   + PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1))
     return seconds * (1.0 + FIRST_CALL_SHARE)
 
 

@@ -124,7 +124,8 @@ def test_before_any_call_its_cost_is_the_prior_on_drjits_threads(oidn):
     threads = max(dr.thread_count(), 1)
     for quality, per_pixel in denoise.PRIOR_SECONDS.items():
         assert denoise.expected_seconds(10_000, quality) == pytest.approx(
-            per_pixel * 10_000 / threads * (1 + denoise.FIRST_CALL_SHARE))
+            (denoise.PRIOR_FIXED[quality] + per_pixel * 10_000 / threads)
+            * (1 + denoise.FIRST_CALL_SHARE))
 
 
 def test_missing_extra_is_a_one_line_error(monkeypatch):
