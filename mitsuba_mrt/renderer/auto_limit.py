@@ -293,7 +293,12 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
     they were looked up, which took time the question then counts).  Where
     denoising the textured surfaces as their shading would end past the
     limit itself (:data:`SHADING_EXTRA`) but plain OIDN would not, the
-    passes go without them (None, looked up).
+    passes go without them (None, looked up).  Where the probe tells a pass's
+    time and the passes have no launch to plan from, the probe's line (its
+    time beyond its kernels, and :data:`PASS_OVER_GRID` of its kernels' an
+    spp) sizes their first launch (:attr:`.launch_cost.LaunchCost.prior`;
+    it overstated a first launch of 1-8 spp by 1.1-2.8 times on the
+    gallery at 256 and 512 px), where a new spp compiles nothing.
     ``probed``: the grid probe, where :func:`mrt_within` has made it;
     ``traced``: what it traced of every pixel."""
     width, height, limit = pattern.width, pattern.height, params.time_limit
@@ -323,7 +328,11 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
         # recorded launch may hold a compilation it could not tell apart)
         spp = launches.cheapest()
         pass_s = min(probed.host + spp * (probed.pass_s - probed.host), launches(spp))
-    pass_s += _passes_recording_s(key, probed)
+    recording = _passes_recording_s(key, probed)
+    pass_s += recording
+    if not launches.launches and not launches.spp_compiles:
+        # the passes' first launch sized by the probe's line, not 1 spp
+        launches.prior = (probed.host + recording, probed.pass_s - probed.host)
 
     def due(shading: bool) -> bool:
         return _preview_due(end, time.perf_counter() + pass_s, width * height,

@@ -119,6 +119,10 @@ class LaunchCost:
     #: layout made it: :meth:`~.api.GridTracer.pass_recorded`): it records
     #: nothing anew, and compiles nothing where ``spp_compiles``.
     replays: frozenset = frozenset()
+    #: The line (fixed, per_spp) before any launch: a guess that overstates
+    #: a first launch (the grid probe's, :func:`.auto_limit.preview_first`);
+    #: None: a first launch is the cheapest.
+    prior: tuple | None = None
 
     def __post_init__(self):
         self.launches = [Launch(*launch) for launch in self.launches]
@@ -153,7 +157,7 @@ class LaunchCost:
         points = [launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
                   for launch in measured or self.launches]
         if not points:
-            return 0.0, 0.0
+            return self.prior or (0.0, 0.0)
         spp = np.array([launch.spp for launch in points], dtype=float)
         seconds = np.array([launch.seconds for launch in points])
         sizes = len(set(spp))
@@ -237,17 +241,19 @@ class LaunchCost:
     def first(self, seconds: float) -> int:
         """The spp of a time-limited render's first launch, to end within
         ``seconds``: the most that :meth:`fits` them (the line through
-        earlier renders' launches, with no :data:`ROUND_SAFETY`), else the
-        cheapest.  Where a new spp compiles, only spp launched before fit
-        (a stratifying sampler's one launch of more spp beats several of
-        fewer, each a stratum of its own; the rest of the time is filled
-        after it).
+        earlier renders' launches, with no :data:`ROUND_SAFETY`, or before
+        any, the :attr:`prior`), else the cheapest.  Where a new spp
+        compiles, only spp launched before fit (a stratifying sampler's one
+        launch of more spp beats several of fewer, each a stratum of its
+        own; the rest of the time is filled after it).
 
         Examples
         --------
         >>> cost = LaunchCost([(9, 0.25, False)], spp_compiles=True, replays=frozenset([1]))
         >>> cost.first(0.1), cost.first(0.27), cost.first(0.4)
         (1, 9, 9)
+        >>> LaunchCost().first(0.2), LaunchCost(prior=(0.02, 0.03)).first(0.2)
+        (1, 6)
         """
         return self.fits(seconds) or self.cheapest()
 

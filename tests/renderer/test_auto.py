@@ -567,6 +567,8 @@ def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, 
     monkeypatch.setattr(auto_limit, "_launch_costs", {})  # (not earlier tests' launches)
     first = mitsuba_mrt.render(scene, time_limit=10.0)  # passes: their launches are kept
     assert first.auto.choice.kind == "denoised"
+    # (its one launch, sized by the probe, recorded its kernels; this one replays them)
+    assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
     monkeypatch.setattr(auto_limit, "_first_round_s", {})  # no first round's time to go by
 
     def probe(*args):
@@ -574,6 +576,14 @@ def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, 
     monkeypatch.setattr(auto_limit, "_grid_probe", probe)
     again = mitsuba_mrt.render(scene, time_limit=10.0)
     assert again.auto.choice.kind == "denoised"
+
+
+def test_a_first_time_limit_sizes_its_first_launch_by_the_grid_probe(scene, monkeypatch):
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})  # (no launches to plan from)
+    monkeypatch.setattr(auto_limit, "_first_round_s", {})
+    assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
+    (cost,) = auto_limit._launch_costs.values()
+    assert cost.prior is not None and cost.launches[0].spp > 1  # (not a 1-spp launch first)
 
 
 def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monkeypatch):
