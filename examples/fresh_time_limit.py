@@ -15,6 +15,13 @@ With ``--cold-cache`` every limit's process gets an empty Dr.Jit kernel
 cache (its own ``HOME``) and compiles every kernel it uses: what a first run
 on a new machine pays.  The full renders keep the cache, so that the limits
 are the same shares of a full render's usual time.
+
+With ``--errors`` each limit's image is kept, and the alternative's ladder
+(every pixel at 1-32 spp, box filter, OIDN ``fast`` and ``high``: what
+``bench rival`` calls the alternative done right) is rendered once per
+scene, each rung in a fresh process too: printed besides, the image's error
+(the report's metric, against the converged renders ``bench rival`` keeps in
+``--truths``) over the lowest of the rungs that ended within the limit.
 """
 
 import argparse
@@ -44,11 +51,16 @@ if sys.argv[2] == "full":
 else:
     begin = time.perf_counter()
     result = mitsuba_mrt.render(scene, time_limit=float(sys.argv[2]))
-    print(json.dumps({"seconds": time.perf_counter() - begin, "chose": result.auto.choice.label}))
+    seconds = time.perf_counter() - begin
+    if sys.argv[4] != "-":
+        import numpy as np
+        np.save(sys.argv[4], np.asarray(result.image, dtype=np.float32)[..., :3])
+    print(json.dumps({"seconds": seconds, "chose": result.auto.choice.label,
+                      "denoised": result.mode_used == "full+oidn"}))
 """
 
 
-def _child(path: Path, limit: str, res: int, cold: bool = False) -> dict:
+def _child(path: Path, limit: str, res: int, cold: bool = False, image: str = "-") -> dict:
     env = dict(os.environ)
     # as a user's Python: the package's modules compiled once, their bytecode
     # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
@@ -56,7 +68,7 @@ def _child(path: Path, limit: str, res: int, cold: bool = False) -> dict:
     with tempfile.TemporaryDirectory() as home:
         if cold:  # (Dr.Jit keeps its kernel cache under HOME)
             env["HOME"] = home
-        out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit, str(res)],
+        out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit, str(res), image],
                              env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -67,14 +79,58 @@ def main():
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--cold-cache", action="store_true",
                         help="each limit's process with an empty kernel cache")
+    parser.add_argument("--errors", action="store_true",
+                        help="also each image's error over the alternative's best within the limit")
+    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
+                        help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
     for name in args.scenes:
         path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
         full = statistics.median(_child(path, "full", args.res)["seconds"] for _ in range(3))
+        errors = _Errors(path, name, args.res, Path(args.truths)) if args.errors else None
         for share in LIMITS:
-            run = _child(path, str(share * full), args.res, args.cold_cache)
+            with tempfile.TemporaryDirectory() as folder:
+                image = os.path.join(folder, "image.npy") if errors else "-"
+                run = _child(path, str(share * full), args.res, args.cold_cache, image)
+                error = "" if errors is None else errors.line(run, image, share * full)
             print(f"{name}: full {full:.3f} s; limit {share}: "
-                  f"{run['seconds'] / (share * full):.2f}x the limit ({run['chose']})", flush=True)
+                  f"{run['seconds'] / (share * full):.2f}x the limit{error} ({run['chose']})",
+                  flush=True)
+
+
+class _Errors:
+    """``--errors``: a scene's converged renders and the alternative's ladder,
+    each rung rendered once in a fresh process (:mod:`fresh_default`'s child)."""
+
+    def __init__(self, path: Path, name: str, res: int, truths: Path):
+        import numpy as np
+
+        import mitsuba_mrt
+        from fresh_default import LADDER, _child as ladder_child
+        from mitsuba_mrt.bench.experiments import gallery_defines
+        from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
+        from mitsuba_mrt.recon.metrics import paper_error
+
+        mitsuba_mrt.activate("auto")
+        defines = gallery_defines(name, res)
+        scene = mitsuba_mrt.load_scene(str(path), **defines)
+        self.truth = converged_truth(scene, CONVERGED_SPP,
+                                     truth_file(truths, name, scene, CONVERGED_SPP))
+        self.error, self.np = paper_error, np
+        self.rungs = []  # (seconds, error)
+        with tempfile.TemporaryDirectory() as folder:
+            for quality in ("fast", "high"):
+                for spp in LADDER:
+                    report, image = ladder_child(path, f"{quality}@{spp}", defines, folder)
+                    self.rungs.append((report["seconds"], paper_error(image, self.truth["box"])))
+
+    def line(self, run: dict, image: str, limit: float) -> str:
+        """`, error E x the alternative's best within the limit`."""
+        mine = self.error(self.np.load(image), self.truth["box" if run["denoised"] else "film"])
+        within = [error for seconds, error in self.rungs if seconds <= limit]
+        if not within:
+            return f", error {mine:.5f} (no rung of the alternative within it)"
+        return f", error {mine:.5f}, {mine / min(within):.2f}x the alternative's best within it"
 
 
 if __name__ == "__main__":
