@@ -4,7 +4,7 @@
 
 Per gallery scene (its 64 spp), warm, in this process, against the
 box-filtered converged renders ``bench rival`` uses (the report's metric;
-read from or kept in ``--truths``), three ``auto`` renders
+read from or kept in ``--truths``), three ``auto`` renders, each planned anew,
 of the default target alternate ``--repeats`` times:
 
 - ``plain``: OIDN ``fast`` on every pixel (``denoise_quality="fast"``, the
@@ -41,6 +41,7 @@ def main():
     from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.renderer.state import clear_caches
 
     runtime.configure()
     mitsuba_mrt.activate("auto")
@@ -53,6 +54,7 @@ def main():
 
         def run(shading, quality):
             progressive.SHADING = shading
+            clear_caches()  # (each planned anew: a kept plan would be another method's)
             try:
                 return mitsuba_mrt.render(scene, denoise_quality=quality)
             finally:
