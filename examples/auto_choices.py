@@ -38,7 +38,7 @@ def main():
     import mitsuba_mrt
     from mitsuba_mrt import runtime
     from mitsuba_mrt.bench.experiments import gallery_defines
-    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
+    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.renderer.state import clear_caches
@@ -49,8 +49,7 @@ def main():
     for name in args.scenes:
         scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
                                        **gallery_defines(name, args.res))
-        truth = converged_truth(scene, CONVERGED_SPP,
-                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))["box"]
+        truth = kept_truth(scene, name, Path(args.truths))["box"]
 
         def run(shading, quality):
             progressive.SHADING = shading

@@ -64,7 +64,7 @@ def main():
     args = parser.parse_args()
     import mitsuba_mrt
     from mitsuba_mrt.bench.experiments import gallery_defines
-    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
+    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel, grid_pattern
     from mitsuba_mrt.renderer import pilot
@@ -83,8 +83,7 @@ def main():
         spp = int(sensor.sampler().sample_count())
         tracer = GridTracer(scene, sensor, unwrap(scene, None).nested, spp, 0)
         xy = every_pixel(width, height)
-        truth = converged_truth(scene, CONVERGED_SPP,
-                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))
+        truth = kept_truth(scene, name, Path(args.truths))
         refs = {}
         for kind in ("film", "box"):
             one = replace(tracer, spp=args.ref_spp)

@@ -81,13 +81,12 @@ def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> 
     """``bench rival``'s rows of the full render, the default ``auto`` and
     the alternative's ladder, each render in a fresh process; the converged
     renders kept in ``truths`` (made and kept there if missing)."""
-    from mitsuba_mrt.bench.rival import (ALTERNATIVE, CONVERGED_SPP, Row, converged_truth,
-                                         noise_free_mse, truth_file)
+    from mitsuba_mrt.bench.rival import ALTERNATIVE, Row, kept_truth, noise_free_mse
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.scene import load_scene
 
     scene = load_scene(str(path), **defines)
-    truth = converged_truth(scene, CONVERGED_SPP, truth_file(truths, name, scene, CONVERGED_SPP))
+    truth = kept_truth(scene, name, truths)
     methods = ["full", "auto"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
     runs = {m: [] for m in methods}
     with tempfile.TemporaryDirectory() as folder:

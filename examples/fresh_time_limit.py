@@ -108,14 +108,13 @@ class _Errors:
         import mitsuba_mrt
         from fresh_default import LADDER, _child as ladder_child
         from mitsuba_mrt.bench.experiments import gallery_defines
-        from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
+        from mitsuba_mrt.bench.rival import kept_truth
         from mitsuba_mrt.recon.metrics import paper_error
 
         mitsuba_mrt.activate("auto")
         defines = gallery_defines(name, res)
         scene = mitsuba_mrt.load_scene(str(path), **defines)
-        self.truth = converged_truth(scene, CONVERGED_SPP,
-                                     truth_file(truths, name, scene, CONVERGED_SPP))
+        self.truth = kept_truth(scene, name, truths)
         self.error, self.np = paper_error, np
         self.rungs = []  # (seconds, error)
         with tempfile.TemporaryDirectory() as folder:

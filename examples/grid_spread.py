@@ -70,7 +70,7 @@ def main():
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, noise_free_mse, truth_file
+    from mitsuba_mrt.bench.rival import kept_truth, noise_free_mse
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.api import render, render_denoised, render_reference
 
@@ -78,8 +78,7 @@ def main():
     mitsuba_mrt.activate("auto")
     for name in args.scenes:
         scene = load(name, args.res)
-        truth = converged_truth(scene, CONVERGED_SPP,
-                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))
+        truth = kept_truth(scene, name, Path(args.truths))
         methods = {"full": lambda seed: (render_reference(scene, seed=seed)[0], "film")}
         for quality in ("fast", "high"):
             for spp in LADDER:

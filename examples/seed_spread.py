@@ -32,19 +32,17 @@ def main():
     args = parser.parse_args()
 
     import mitsuba_mrt
+    from grid_spread import load  # (the gallery scene, or Fig. 1 with path)
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.experiments import gallery_defines
-    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
+    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.api import render_denoised
 
     runtime.configure()
     mitsuba_mrt.activate("auto")
     for name in args.scenes:
-        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
-                                       **gallery_defines(name, args.res))
-        truth = converged_truth(scene, CONVERGED_SPP,
-                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))["box"]
+        scene = load(name, args.res)
+        truth = kept_truth(scene, name, Path(args.truths))["box"]
         errors = np.array([paper_error(render_denoised(scene, spp=args.spp, quality="high",
                                                        seed=seed)[0], truth)
                            for seed in range(args.seeds)])

@@ -33,7 +33,7 @@ def main():
     import mitsuba_mrt
     from mitsuba_mrt import runtime
     from mitsuba_mrt.bench.experiments import gallery_defines
-    from mitsuba_mrt.bench.rival import CONVERGED_SPP, converged_truth, truth_file
+    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.denoise import denoise_image, denoise_shading, textured_pixels
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel
@@ -47,8 +47,7 @@ def main():
     for name in args.scenes:
         scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
                                        **gallery_defines(name, args.res))
-        truth = converged_truth(scene, CONVERGED_SPP,
-                                truth_file(Path(args.truths), name, scene, CONVERGED_SPP))["box"]
+        truth = kept_truth(scene, name, Path(args.truths))["box"]
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
         xy = every_pixel(width, height)

@@ -197,6 +197,13 @@ def truth_file(folder: Path | None, name: str, scene, spp: int) -> Path | None:
     return Path(folder) / f"rival_{name}_{width}x{height}_{spp}.npz"
 
 
+def kept_truth(scene, name: str, folder: Path | None, spp: int = CONVERGED_SPP) -> Truth:
+    """Scene ``name``'s converged renders at ``spp``, read from ``folder``
+    where ``bench rival`` kept them (:func:`truth_file`), else made and kept
+    there (:func:`converged_truth`)."""
+    return converged_truth(scene, spp, truth_file(folder, name, scene, spp))
+
+
 def _read_truth(cache: Path | None, shape: tuple) -> Truth | None:
     """The :class:`Truth` kept in ``cache`` if it is there, whole and of ``shape``."""
     if cache is None or not Path(cache).is_file():
@@ -225,7 +232,7 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     scene = load_scene(path, **defines)
     spp = int(scene.sensors()[0].sampler().sample_count())
     truth_spp = QUICK_CONVERGED_SPP if quick else truth_spp
-    truth = converged_truth(scene, truth_spp, truth_file(cache, name, scene, truth_spp))
+    truth = kept_truth(scene, name, cache, truth_spp)
     ladder = [s for s in LADDER if s <= spp] if not quick else [1, 4]
 
     def alternative(s, quality):

@@ -146,6 +146,10 @@ def test_converged_renders_know_their_own_noise_and_are_kept(tmp_path, variant, 
     other = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / "cornell.xml", res=8)
     with pytest.raises(AssertionError, match="rendered again"):
         rival.converged_truth(other, 256, cache)
+    # what the examples read: the file bench rival keeps in its folder for the scene
+    rival.truth_file(tmp_path, "cornell", scene, 256).write_bytes(cache.read_bytes())
+    kept = rival.kept_truth(scene, "cornell", tmp_path, 256)
+    assert np.array_equal(kept["film"], truth["film"])
 
 
 def test_a_bad_truth_spp_is_one_line_and_exit_2(tmp_path):
