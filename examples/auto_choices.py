@@ -1,6 +1,6 @@
 """What ``auto``'s passes gain from their two choices of OIDN's use, each against the same passes without it.
 
-    python examples/auto_choices.py checker_border spot_textures two_sensors room crop_rgba --res 256
+    python examples/auto_choices.py spot_textures room crop_rgba materials instanced --res 256
 
 Per gallery scene (its 64 spp), warm, in this process, against the
 box-filtered converged renders ``bench rival`` uses (the report's metric;
