@@ -1,9 +1,8 @@
 """``auto --time-limit`` as a user's first render: each render in a fresh process.
 
-    python examples/fresh_time_limit.py checker_border cornell crop_rgba envmap_objects \
-        instanced materials room spot_textures two_sensors [--res 512] [--cold-cache]
+    python examples/fresh_time_limit.py [SCENE ...] [--res 512] [--cold-cache] [--errors]
 
-Per gallery scene at ``--res`` a side (256 by default): the full render in three fresh processes
+Per gallery scene (all nine by default) at ``--res`` a side (256 by default): the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
 rendering once with ``time_limit``.  Printed: each render call's wall time
 over its limit and the plan it chose.  Kernels come from Dr.Jit's disk cache and
@@ -32,6 +31,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMITS = (0.1, 0.25, 0.5)
@@ -75,7 +76,7 @@ def _child(path: Path, limit: str, res: int, cold: bool = False, image: str = "-
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenes", nargs="+")
+    parser.add_argument("scenes", nargs="*", help="gallery scenes (default: all nine)")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--cold-cache", action="store_true",
                         help="each limit's process with an empty kernel cache")
@@ -84,7 +85,9 @@ def main():
     parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
                         help="folder of the converged renders bench rival keeps")
     args = parser.parse_args()
-    for name in args.scenes:
+    from mitsuba_mrt.bench.experiments import GALLERY_SCENES
+
+    for name in args.scenes or GALLERY_SCENES:
         path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
         full = statistics.median(_child(path, "full", args.res)["seconds"] for _ in range(3))
         errors = _Errors(path, name, args.res, Path(args.truths)) if args.errors else None
@@ -103,8 +106,6 @@ class _Errors:
     each rung rendered once in a fresh process (:mod:`fresh_default`'s child)."""
 
     def __init__(self, path: Path, name: str, res: int, truths: Path):
-        import numpy as np
-
         import mitsuba_mrt
         from fresh_default import LADDER, _child as ladder_child
         from mitsuba_mrt.bench.experiments import gallery_defines
@@ -115,7 +116,6 @@ class _Errors:
         defines = gallery_defines(name, res)
         scene = mitsuba_mrt.load_scene(str(path), **defines)
         self.truth = kept_truth(scene, name, truths)
-        self.error, self.np = paper_error, np
         self.rungs = []  # (seconds, error)
         with tempfile.TemporaryDirectory() as folder:
             for quality in ("fast", "high"):
@@ -125,7 +125,9 @@ class _Errors:
 
     def line(self, run: dict, image: str, limit: float) -> str:
         """`, error E x the alternative's best within the limit`."""
-        mine = self.error(self.np.load(image), self.truth["box" if run["denoised"] else "film"])
+        from mitsuba_mrt.recon.metrics import paper_error
+
+        mine = paper_error(np.load(image), self.truth["box" if run["denoised"] else "film"])
         within = [error for seconds, error in self.rungs if seconds <= limit]
         if not within:
             return f", error {mine:.5f} (no rung of the alternative within it)"

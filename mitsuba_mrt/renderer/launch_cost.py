@@ -149,7 +149,8 @@ class LaunchCost:
     def _line(self) -> tuple[float, float]:
         """(fixed, per_spp) of a replayed launch: through the replayed
         launches and the recorded ones whose recording was measured (all of
-        them where none was), each less what recording took."""
+        them where none was), each less what recording took; before any
+        launch, :attr:`prior`."""
         # (a cost's first launch also paid for first uses; a line through small
         # replays alone misses what larger launches cost)
         measured = [launch for launch in self.launches if not launch.recorded
