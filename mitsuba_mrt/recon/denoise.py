@@ -152,10 +152,19 @@ def expected_seconds(pixels: int, quality: str) -> float:
     if pixels in _state.get("recent", {}).get(quality, {}):
         return seconds
     if seconds is None:
-        import drjit as dr
+        return prior_seconds(pixels, quality)
+    return seconds * (1.0 + FIRST_CALL_SHARE)
 
-        seconds = (PRIOR_FIXED[quality]
-                   + PRIOR_SECONDS[quality] * pixels / max(int(dr.thread_count()), 1))
+
+def prior_seconds(pixels: int, quality: str) -> float:
+    """What a process's first call on ``pixels`` pixels at ``quality`` is
+    expected to take before any call has measured one: :data:`PRIOR_FIXED`
+    and :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
+    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
+    import drjit as dr
+
+    seconds = PRIOR_FIXED[quality] + PRIOR_SECONDS[quality] * pixels / max(
+        int(dr.thread_count()), 1)
     return seconds * (1.0 + FIRST_CALL_SHARE)
 
 

@@ -18,7 +18,7 @@ from dataclasses import replace
 from typing import NamedTuple
 
 from ..modes.plan import Candidate, Plan
-from ..recon.denoise import denoise_seconds, expected_seconds, preset
+from ..recon.denoise import denoise_seconds, expected_seconds, preset, prior_seconds
 from ..recon.sampling import SamplePattern
 from ..runtime.jit import kernel_seconds
 from ..runtime.recent import keep, note, typical
@@ -64,6 +64,17 @@ PREVIEW_SLACK = 1.1
 #: 256 px), so the pass and OIDN must be expected to end within the limit
 #: itself.
 PROBED_SLACK = 1.0
+
+#: Under a time limit, a process's first passes of a scene are launched
+#: without the grid probe where the limit is at least this many times
+#: OIDN's first-call prior for the image
+#: (:func:`~mitsuba_mrt.recon.denoise.prior_seconds`): a fresh process's
+#: first 1-spp pass over every pixel took 0.46-2.54 times that prior on the
+#: gallery at 256 and 512 px (its kernels' recording, as the probe's, is
+#: most of it at 256 px), so that a pass and the call end within the
+#: passes' share of the limit (:data:`TIME_MARGIN`), and the probe, as long
+#: again, would only take time from the passes.
+UNPROBED_OVER_OIDN = 4.0
 
 #: Under a time limit, what denoising textured diffuse surfaces as their
 #: shading (:attr:`.progressive.Passes.shading`) adds to a pass's last OIDN
@@ -293,7 +304,10 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
     they were looked up, which took time the question then counts).  Where
     denoising the textured surfaces as their shading would end past the
     limit itself (:data:`SHADING_EXTRA`) but plain OIDN would not, the
-    passes go without them (None, looked up).  Where the probe tells a pass's
+    passes go without them (None, looked up).  A process's first passes of
+    the scene are not probed where the time left is long enough for a pass
+    and OIDN whatever the scene (:func:`_passes_fit_unprobed`): their first
+    launch, of 1 spp, measures them.  Where the probe tells a pass's
     time and the passes have no launch to plan from, the probe's line (its
     time beyond its kernels, and :data:`PASS_OVER_GRID` of its kernels' an
     spp) sizes their first launch (:attr:`.launch_cost.LaunchCost.prior`;
@@ -318,6 +332,13 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
             _first_round_s.pop(key, None)
             return AutoOutcome(preview), None, False
         return None, None, textured and late(True)  # (then denoised plainly)
+    left = started + limit - time.perf_counter()
+    if probed is None and not launches.launches and _passes_fit_unprobed(
+            left, width * height, params.denoise_quality):
+        # the passes' own first launch tells their cost: a probe would record
+        # kernels of its own, about as long, for a question the time answers
+        return None, None, textured and not _passes_fit_unprobed(
+            left, width * height, params.denoise_quality, SHADING_EXTRA)
     probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
     end = started + PROBED_SLACK * limit
     grid, pass_s = probed.grid, probed.pass_s
@@ -460,6 +481,14 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
     pixels = pattern.width * pattern.height
     return _Probe(grid, host + PASS_OVER_GRID * spent.execute * pixels / pattern.count,
                   spent.execute, host, recordings() > recorded, min(spent.compile, host))
+
+
+def _passes_fit_unprobed(left: float, pixels: int, quality: str, extra: float = 0.0) -> bool:
+    """Whether ``left`` seconds leave a process's first pass over ``pixels``
+    and OIDN's call at ``quality`` (``extra`` share longer) so much time
+    that no probe need ask: at least :data:`UNPROBED_OVER_OIDN` times the
+    call's first-call prior (:func:`~mitsuba_mrt.recon.denoise.prior_seconds`)."""
+    return left >= UNPROBED_OVER_OIDN * (1.0 + extra) * prior_seconds(pixels, preset(quality))
 
 
 def _preview_due(end: float, first_end: float, pixels: int, quality: str,

@@ -581,9 +581,27 @@ def test_a_time_limit_plans_from_earlier_passes_launches_not_a_new_probe(scene, 
 def test_a_first_time_limit_sizes_its_first_launch_by_the_grid_probe(scene, monkeypatch):
     monkeypatch.setattr(auto_limit, "_launch_costs", {})  # (no launches to plan from)
     monkeypatch.setattr(auto_limit, "_first_round_s", {})
+    # (a limit that leaves a pass and OIDN less than the unprobed share)
+    monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)
     assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
     (cost,) = auto_limit._launch_costs.values()
     assert cost.prior is not None and cost.launches[0].spp > 1  # (not a 1-spp launch first)
+
+
+def test_a_first_time_limit_far_above_oidn_is_not_probed(scene, monkeypatch):
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
+    monkeypatch.setattr(auto_limit, "_first_round_s", {})
+    monkeypatch.setattr(auto_limit, "unmeasured_plan", lambda *args: None)  # (no MRT plan)
+
+    def probe(*args):
+        raise AssertionError("the grid was probed")
+    monkeypatch.setattr(auto_limit, "_grid_probe", probe)
+    assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
+    (cost,) = auto_limit._launch_costs.values()
+    assert cost.prior is None and cost.launches[0].spp == 1  # (it measures the passes)
+    pixels = scene.sensors()[0].film().crop_size()
+    assert not auto_limit._passes_fit_unprobed(
+        1e-3, int(pixels[0] * pixels[1]), "fast")  # (a short limit asks the probe)
 
 
 def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monkeypatch):
@@ -1345,6 +1363,7 @@ def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
         ends.append(end - first_end)
         return True
     monkeypatch.setattr(auto_limit, "_preview_due", due)
+    monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)  # (the probe asked)
     for slack in (1.0, 3.0):
         monkeypatch.setattr(auto_limit, "_launch_costs", {})
         monkeypatch.setattr(auto_limit, "_first_round_s", {})
