@@ -190,11 +190,11 @@ def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
 def kept_cost(key: tuple, tracer) -> LaunchCost:
     """The launches kept for ``key`` (new where there are none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
-    a 1-spp launch among its :attr:`~.launch_cost.LaunchCost.replays` where
-    another trace recorded its layout (a full render denoised, at 1 spp)."""
+    launches of 1 and 2 spp among its :attr:`~.launch_cost.LaunchCost.replays`
+    where another trace recorded their layout (a full render denoised)."""
     cost = _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
         spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))
-    cost.replays = frozenset([1] if tracer.pass_recorded(1) else [])
+    cost.replays = frozenset(spp for spp in (1, 2) if tracer.pass_recorded(spp))
     return cost
 
 

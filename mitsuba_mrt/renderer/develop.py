@@ -24,7 +24,7 @@ import numpy as np
 from .lanes import is_jit, logical_not
 from .pixel_filter import GUIDE_BINS, filter_table
 from .replay import Replay
-from .scene_query import has_delta_lobes
+from .scene_query import has_delta_lobes, sampler_bakes_spp
 
 #: Specular (mirror) bounces followed: by a sample's albedo (:func:`_albedo_along`)
 #: and by the id trace (:mod:`.ids`).
@@ -271,7 +271,8 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
     sums = _DEVELOP(scene, sensor, integrator, _aligned(traced[:, 0]),
                     _aligned(traced[:, 1]), _aligned(table.cdf),
                     _aligned(first, np.uint32),
-                    dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp), layout,
+                    dr.opaque(mi.UInt32, seed & 0xFFFFFFFF), dr.opaque(mi.UInt32, spp),
+                    _lanes(n * spp), layout,
                     objects=(scene, sensor, integrator), record=replay)
     if splat:  # the block holds the channels read, in order; the others are zero
         block = sums.numpy().reshape(width * height, len(read))
@@ -286,17 +287,41 @@ def _develop_jit(scene, sensor, integrator, sampler, pixel_xy, spp, seed, albedo
                      bool(albedo and normals), bool(few), variance)
 
 
+def _lanes(count: int):
+    """The samples' lanes for :func:`_develop_kernel`: ``count`` True values,
+    an input whose width a replay of a recording takes as the samples'."""
+    return dr.arange(mi.UInt32, count) < dr.opaque(mi.UInt32, count)
+
+
 def _layout(scene, sensor, integrator, n: int, spp: int, albedo, every: bool, splat: bool,
             table, box: bool, halves, normals, few: int) -> tuple:
     """What :func:`_develop_kernel` bakes in (its ``layout``), so that a
-    recording is replayed only where it holds."""
+    recording is replayed only where it holds: the spp where the sampler
+    bakes it into its arithmetic (:func:`.scene_query.sampler_bakes_spp`),
+    else :func:`spp_class`'s, and a recording replays at every spp of its class."""
     film = sensor.film()
     steps = None if table.uniform else table.guide[1]
-    return (n, int(spp), integrator is not None, bool(albedo), every, splat,
+    baked = spp_class(spp, sampler_bakes_spp(sensor.sampler()))
+    return (n, baked, integrator is not None, bool(albedo), every, splat,
             *(int(v) for v in film.crop_size()), tuple(int(v) for v in film.crop_offset()),
             bool(film.sample_border()), float(table.radius), len(table.pdf), steps, bool(box),
             MIRROR_DEPTH if albedo and has_delta_lobes(scene) else 0, bool(halves),
             bool(albedo and normals), few)
+
+
+def spp_class(spp: int, bakes: bool) -> int:
+    """The spp a recording of :func:`_develop_jit` is made for, that replays
+    for ``spp``: ``spp`` itself where the sampler bakes it (``bakes``), else
+    1 for 1 and 2 for every larger count (a recording made at 1 spp, whose
+    samples are as many as its pixels, did not replay at more: Dr.Jit
+    recorded again).
+
+    Examples
+    --------
+    >>> [spp_class(spp, False) for spp in (1, 2, 7)], spp_class(7, True)
+    ([1, 2, 2], 7)
+    """
+    return int(spp) if bakes else min(int(spp), 2)
 
 
 def every_pixel_recorded(scene, sensor, integrator, spp: int, albedo: bool,
@@ -309,7 +334,8 @@ def every_pixel_recorded(scene, sensor, integrator, spp: int, albedo: bool,
     objects = (scene, sensor, integrator)
     # (a layout's first values: its pixel count and spp; the rest is worked
     # out, its filter's table made, only where a recording has those)
-    if all(layout[:2] != (width * height, spp) for layout in _DEVELOP.layouts(objects)):
+    baked = spp_class(spp, sampler_bakes_spp(sensor.sampler()))
+    if all(layout[:2] != (width * height, baked) for layout in _DEVELOP.layouts(objects)):
         return False
     layout = _layout(scene, sensor, integrator, width * height, spp, albedo, True, False,
                      filter_table(box_filter()), True, halves, True, 0)
@@ -349,7 +375,7 @@ def filter_offset(u, cdf, first, steps: int | None, cells: int, radius: float):
 
 
 def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, seed, spp_input,
-                    layout):
+                    lanes, layout):
     """The kernels of :func:`_develop_jit`: the samples' filter-weighted sums,
     per pixel (a list of channels) or, splatted over every pixel through the
     filter, as an image block's tensor.  Everything they depend on is an
@@ -358,7 +384,10 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
 
     The spp is also an opaque input (``spp_input``), not a literal: a kernel
     compiled for one spp is the kernel of every other (only the sampler's
-    own arithmetic may bake it in: ``stratified``, ``multijitter``).
+    own arithmetic may bake it in: ``stratified``, ``multijitter``).  The
+    samples' lanes are ``lanes`` (:func:`_lanes`), which every kernel of
+    the samples reads: a recording made at one spp replays at another of
+    its :func:`spp_class`, its kernels' width taken from theirs.
 
     The sampler is made here, not passed: a frozen function's inputs are
     also its outputs, and the sampler's state after the samples would cost
@@ -369,16 +398,19 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
     film = sensor.film()
     rfilter = box_filter() if box else film.rfilter()
     sampler = sensor.sampler().clone()
-    sampler.set_sample_count(spp)
-    sampler.set_samples_per_wavefront(spp)
-    sampler.seed(seed, n * spp)
-    owner = dr.arange(mi.UInt32, n * spp) // spp_input  # lanes pixel-major, as Mitsuba's own
+    count = dr.width(lanes)  # (as recorded; a replay takes its width from ``lanes``)
+    if sampler_bakes_spp(sampler):  # (recorded per spp: ``spp`` is the count)
+        sampler.set_sample_count(spp)
+        sampler.set_samples_per_wavefront(spp)
+    sampler.seed(seed, count)
+    owner = dr.arange(mi.UInt32, count) // spp_input  # lanes pixel-major, as Mitsuba's own
 
     def offset(u):
         return filter_offset(u, cdf, first, steps, cells, radius)
 
     u = sampler.next_2d()
-    pixel = mi.Point2f(dr.gather(mi.Float, pixel_x, owner), dr.gather(mi.Float, pixel_y, owner))
+    pixel = mi.Point2f(dr.gather(mi.Float, pixel_x, owner, lanes),
+                       dr.gather(mi.Float, pixel_y, owner, lanes))
     if every:
         position, weight = pixel + u, mi.Float(1.0)
     else:
@@ -386,7 +418,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
         position = pixel + 0.5 + d
         # f / density is a constant of the filter's sign: the weight is that sign
         weight = dr.sign(rfilter.eval(d.x) * rfilter.eval(d.y))
-    active = mi.Bool(True) if sample_border else (
+    active = lanes if sample_border else lanes & (
         (position.x >= 0) & (position.x < width) & (position.y >= 0) & (position.y < height))
     weight = dr.select(active, weight, 0.0)
 
@@ -403,7 +435,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
     a_weight, a_rgb, normal = zero, mi.Color3f(0.0), mi.Vector3f(0.0)
     traces_albedo = active
     if few:  # each pixel's first ``few`` samples (lanes are pixel-major)
-        traces_albedo = active & (dr.arange(mi.UInt32, n * spp) - owner * spp_input < few)
+        traces_albedo = active & (dr.arange(mi.UInt32, count) - owner * spp_input < few)
     if albedo:  # averaged over the samples that hit a surface
         a_rgb, hit, normal = _albedo_along(scene, sampler, ray, traces_albedo, bounces)
         a_weight = dr.select(traces_albedo & hit, weight, 0.0)
@@ -412,7 +444,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
               a_weight * a_rgb.x, a_weight * a_rgb.y, a_weight * a_rgb.z, a_weight, invalid,
               a_weight * normal.x, a_weight * normal.y, a_weight * normal.z]
     if halves:  # the odd-numbered samples of each pixel (lanes are pixel-major)
-        lane = dr.arange(mi.UInt32, n * spp)
+        lane = dr.arange(mi.UInt32, count)
         odd = dr.select(((lane - owner * spp_input) & 1) == 1, weight, 0.0)
         values += [odd * rgb.x, odd * rgb.y, odd * rgb.z, odd]
     if few:  # how far they spread
@@ -435,7 +467,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
     if few:
         albedo_channels |= set(range(len(values) - _SQUARE_CHANNELS, len(values)))
     for k in read:  # (the lanes that trace no albedo add none to its channels)
-        mask = traces_albedo if few and k in albedo_channels else True
+        mask = traces_albedo if few and k in albedo_channels else lanes
         dr.scatter_reduce(dr.ReduceOp.Add, sums[k], values[k], owner, active=mask,
                           mode=dr.ReduceMode.Local)
     few_traced = dr.minimum(mi.Float(few), mi.Float(spp_input)) if few else None

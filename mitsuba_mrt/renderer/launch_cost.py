@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .develop import spp_class
+
 #: A launch planned during a render is to take at most the time left over
 #: this (:class:`LaunchCost` counts a recording's extra; this is for the
 #: machine's noise and the error of a line through this render's first,
@@ -34,6 +36,10 @@ KEPT_LAUNCHES = 8
 #: 1 / (1 - this) times what the line says (``spot_textures``, 0.11: 1.16
 #: times at 4 spp), and one such launch measures the line.
 ONE_SIZE_FIXED = 0.25
+#: The spp of a time-limited render's first launch where nothing tells its
+#: cost (:meth:`LaunchCost.first`): 2, whose recording every larger launch
+#: replays (a first launch of 1 spp would be recorded again for them).
+UNMEASURED_FIRST = 2
 
 
 class Launch(NamedTuple):
@@ -58,8 +64,10 @@ class LaunchCost:
     line through the replayed launches so far (``launches``: :class:`Launch`
     records, or plain (spp, seconds, recorded) tuples; a recorded one less
     what recording took, where measured) moved up until none took longer
-    than it says; a launch of an spp not launched before records
-    anew, which adds :attr:`record_s`.  Where a new spp compiles no kernel
+    than it says; a launch of an spp whose recording class
+    (:func:`~.develop.spp_class`: 1, or every larger spp where the sampler
+    does not bake its spp) was not launched before records anew, which adds
+    :attr:`record_s`.  Where a new spp compiles no kernel
     (``spp_compiles`` False: a sampler that does not bake its spp in,
     :func:`~.scene_query.sampler_bakes_spp`), what a launch spent compiling
     (a process's first, or the disk cache's first) is left out of its time.
@@ -81,8 +89,8 @@ class LaunchCost:
     0.0765
     >>> round(cost.record_s, 3), cost.fits(0.05), cost.fits(0.07)
     (0.018, 2, 3)
-    >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)
-    (0.078, 3)
+    >>> cost.add(2, 0.032); round(cost(4), 3), cost.fits(0.075)  # (2 spp's recording replays)
+    (0.06, 5)
 
     The trace kernels' run time splits a single size's launches (here a fixed
     0.012 s, and at most 0.008 s an spp):
@@ -200,7 +208,11 @@ class LaunchCost:
         return max(last.seconds - fixed - per_spp * last.spp, 0.0)
 
     def _new(self, spp: int) -> bool:
-        return spp not in self.replays and all(spp != launch.spp for launch in self.launches)
+        """Whether a launch of ``spp`` records anew: no launch, nor
+        :attr:`replays`, had an spp of its recording class."""
+        kind = spp_class(spp, self.spp_compiles)
+        return all(kind != spp_class(other, self.spp_compiles)
+                   for other in [*self.replays, *(launch.spp for launch in self.launches)])
 
     def _unplanned(self, spp: int) -> bool:
         """Whether ``spp`` is not planned: a new spp (not in :attr:`replays`)
@@ -246,7 +258,10 @@ class LaunchCost:
         any, the :attr:`prior`), else the cheapest.  Where a new spp
         compiles, only spp launched before fit (a stratifying sampler's one
         launch of more spp beats several of fewer, each a stratum of its
-        own; the rest of the time is filled after it).
+        own; the rest of the time is filled after it).  Before any launch
+        and without a prior, where a new spp compiles nothing:
+        :data:`UNMEASURED_FIRST` (the launch that measures the line, of the
+        recording class of every larger launch).
 
         Examples
         --------
@@ -254,8 +269,10 @@ class LaunchCost:
         >>> cost.first(0.1), cost.first(0.27), cost.first(0.4)
         (1, 9, 9)
         >>> LaunchCost().first(0.2), LaunchCost(prior=(0.02, 0.03)).first(0.2)
-        (1, 6)
+        (2, 6)
         """
+        if not (self.launches or self.spp_compiles) and self.prior is None:
+            return UNMEASURED_FIRST
         return self.fits(seconds) or self.cheapest()
 
     def fits(self, seconds: float) -> int:
@@ -267,6 +284,11 @@ class LaunchCost:
             return 0
         launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
                     if self(spp) <= seconds]  # (none of them new: no recording added)
-        anew = [] if self.spp_compiles and self.launches else [
-            int((seconds - self.record_s - fixed) // per_spp)]
+        if self.spp_compiles and self.launches:
+            return max(launched + [0])
+        def most(spent: float) -> int:  # (a fit's rounding is not a launch short)
+            return math.floor((seconds - spent) / per_spp + 1e-9)
+        replayed = most(fixed)  # (of a class recorded before)
+        anew = [replayed if replayed > 0 and not self._new(replayed)
+                else most(fixed + self.record_s)]
         return max(launched + anew + [0])

@@ -598,7 +598,7 @@ def test_a_first_time_limit_far_above_oidn_is_not_probed(scene, monkeypatch):
     monkeypatch.setattr(auto_limit, "_grid_probe", probe)
     assert mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.kind == "denoised"
     (cost,) = auto_limit._launch_costs.values()
-    assert cost.prior is None and cost.launches[0].spp == 1  # (it measures the passes)
+    assert cost.prior is None and cost.launches[0].spp == launch_cost.UNMEASURED_FIRST
     pixels = scene.sensors()[0].film().crop_size()
     assert not auto_limit._passes_fit_unprobed(
         1e-3, int(pixels[0] * pixels[1]), "fast")  # (a short limit asks the probe)
@@ -1042,10 +1042,10 @@ def test_a_time_limit_alone_fills_its_time_after_one_launch(timed_tracer):
     _, _, progress = progressive.run_passes(
         Tracer(), 2, 2, quality="fast", target_error=None, deadline=30.0, max_spp=64,
         full_spp=16, area=1.0, denoise=False)
-    # 1 spp (2 s, replayed: a launch's cost, a quarter of it taken as fixed), then
-    # at most 1 / 1.15 of what is left: 15 spp at 1.5 s each (16 s: the line is now
-    # 1 s + 1 s an spp), 9 (10 s of 12), and 2 s left hold no launch
-    assert launched == [1, 15, 9] and clock[0] <= 30.0
+    # 2 spp (3 s: nothing tells a launch's cost, and every larger launch replays its
+    # recording), then at most 1 / 1.15 of what is left: 15 spp at 1.5 s each (16 s:
+    # the line is now 1 s + 1 s an spp), 8 (9 s of 11), and 2 s left hold no launch
+    assert launched == [2, 15, 8] and clock[0] <= 30.0
     assert progress.spp == 25 and progress.stopped == "the time limit"
 
 

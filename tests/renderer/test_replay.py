@@ -9,7 +9,7 @@ from mitsuba_mrt import grid_pattern
 from mitsuba_mrt.renderer.replay import padded_size, recordings, replaying
 from mitsuba_mrt.renderer.lanes import is_jit
 from mitsuba_mrt.renderer.trace import trace_pixels
-from helpers import small_scene_xml
+from helpers import ball_scene_xml, small_scene_xml
 
 pytestmark = pytest.mark.skipif(not is_jit(), reason="only JIT variants replay kernels")
 
@@ -30,6 +30,29 @@ def _trace(scene, integrator, xy, replay, seed=3, **kwargs):
 def _fields(trace):
     return [trace.radiance, trace.albedo, trace.shape_index, trace.visible_lights,
             trace.variance, trace.alpha, trace.normal]
+
+
+@pytest.mark.parametrize("box", [False, True], ids=["grid", "every pixel, box"])
+def test_one_recording_replays_every_larger_spp(box):
+    # (the passes' launches: a recording at 2 spp serves 3, 5 and 9 spp; 1 spp is
+    # a recording of its own, where the lanes are as many as the pixels)
+    scene = mi.load_string(ball_scene_xml(24))  # (the independent sampler: spp not baked in)
+    xy = (np.stack(np.meshgrid(np.arange(24), np.arange(24)), -1).reshape(-1, 2) if box
+          else grid_pattern(24, 24, 0.1).pixel_xy)
+    integrator = scene.integrator()
+
+    def trace(spp, replay):
+        return trace_pixels(scene, scene.sensors()[0], integrator, xy, spp, 5, replay=replay,
+                            box=box, ids=not box)
+    trace(2, True)
+    made = recordings()
+    for spp in (3, 5, 9, 2):
+        replayed, plain = trace(spp, True), trace(spp, False)
+        for a, b in zip(_fields(replayed), _fields(plain)):
+            np.testing.assert_array_equal(a, b)
+    assert recordings() == made
+    trace(1, True)
+    assert recordings() == made + 1
 
 
 @pytest.mark.parametrize("every", [False, True], ids=["grid", "every pixel"])
