@@ -42,6 +42,22 @@ ONE_SIZE_FIXED = 0.25
 UNMEASURED_FIRST = 2
 
 
+def _replayed_s(launch: "Launch") -> float:
+    """What ``launch`` would take replayed: its seconds less what recording
+    took in it, at least its trace kernels' run time where measured (a
+    recording call may run the kernels it records, and its time then holds
+    theirs: a replay is not faster than its kernels).
+
+    Examples
+    --------
+    >>> round(_replayed_s(Launch(8, 0.12, True, 0.09, False, 0.11)), 2)
+    0.09
+    """
+    seconds = launch.seconds - (launch.recording or 0.0)
+    return seconds if launch.execute is None else max(seconds, min(launch.execute,
+                                                                    launch.seconds))
+
+
 class Launch(NamedTuple):
     """One launch of passes, as :class:`LaunchCost` keeps it: its spp and
     seconds, whether it recorded its kernels' replay (:mod:`.replay`), its
@@ -163,8 +179,7 @@ class LaunchCost:
         # replays alone misses what larger launches cost)
         measured = [launch for launch in self.launches if not launch.recorded
                     or (launch.recording is not None and not launch.first)]
-        points = [launch._replace(seconds=launch.seconds - (launch.recording or 0.0))
-                  for launch in measured or self.launches]
+        points = [launch._replace(seconds=_replayed_s(launch)) for launch in measured or self.launches]
         if not points:
             return self.prior or (0.0, 0.0)
         spp = np.array([launch.spp for launch in points], dtype=float)
@@ -239,7 +254,7 @@ class LaunchCost:
         overestimates a large one (a stratifying sampler's few sizes:
         ``instanced``'s 1-spp launches put its 9 spp at 1.4 times what its
         own launch took, and a time limit then launched 1 spp at a time)."""
-        return min((launch.seconds - (launch.recording or 0.0) for launch in self.launches
+        return min((_replayed_s(launch) for launch in self.launches
                     if launch.spp == spp and (not launch.recorded or launch.recording is not None)),
                    default=math.inf)
 
