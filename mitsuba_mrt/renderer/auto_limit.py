@@ -307,7 +307,7 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
     passes go without them (None, looked up).  A process's first passes of
     the scene are not probed where the time left is long enough for a pass
     and OIDN whatever the scene (:func:`_passes_fit_unprobed`): their first
-    launch, of 1 spp, measures them.  Where the probe tells a pass's
+    launch (:data:`~.launch_cost.UNMEASURED_FIRST`) measures them.  Where the probe tells a pass's
     time and the passes have no launch to plan from, the probe's line (its
     time beyond its kernels, and :data:`PASS_OVER_GRID` of its kernels' an
     spp) sizes their first launch (:attr:`.launch_cost.LaunchCost.prior`;

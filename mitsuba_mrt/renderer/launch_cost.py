@@ -179,7 +179,8 @@ class LaunchCost:
         # replays alone misses what larger launches cost)
         measured = [launch for launch in self.launches if not launch.recorded
                     or (launch.recording is not None and not launch.first)]
-        points = [launch._replace(seconds=_replayed_s(launch)) for launch in measured or self.launches]
+        points = [launch._replace(seconds=_replayed_s(launch))
+                  for launch in measured or self.launches]
         if not points:
             return self.prior or (0.0, 0.0)
         spp = np.array([launch.spp for launch in points], dtype=float)
