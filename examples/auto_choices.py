@@ -23,7 +23,7 @@ import argparse
 import statistics
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from gallery_scenes import add_truths, load
 
 
 def main():
@@ -31,13 +31,11 @@ def main():
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.experiments import gallery_defines
     from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer import progressive
@@ -47,8 +45,7 @@ def main():
     mitsuba_mrt.activate("auto")
     methods = {"plain": (False, "fast"), "+shading": (True, "fast"), "+high": (True, "auto")}
     for name in args.scenes:
-        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
-                                       **gallery_defines(name, args.res))
+        scene = load(name, args.res)
         truth = kept_truth(scene, name, Path(args.truths))["box"]
 
         def run(shading, quality):

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gallery_scenes import add_truths, load
+
 ROOT = Path(__file__).resolve().parents[1]
 TILE = 8
 
@@ -59,25 +61,22 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--ref-spp", type=int, default=8)
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
     import mitsuba_mrt
-    from mitsuba_mrt.bench.experiments import gallery_defines
     from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel, grid_pattern
     from mitsuba_mrt.renderer import pilot
     from mitsuba_mrt.renderer.api import (GridTracer, render, render_denoised,
                                           render_reference)
-    from mitsuba_mrt.renderer.scene import load_scene, unwrap
+    from mitsuba_mrt.renderer.scene import unwrap
     from mitsuba_mrt.types import MRTParams
 
     mitsuba_mrt.activate("auto")
     print("scene candidate true-L1 naive two-part RMS-est true-RMS")
     for name in args.scenes:
-        scene = load_scene(str(ROOT / "scenes_xml" / "gallery" / f"{name}.xml"),
-                           **gallery_defines(name, 256))
+        scene = load(name, 256)
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
         spp = int(sensor.sampler().sample_count())

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gallery_scenes import add_truths
+
 ROOT = Path(__file__).resolve().parents[1]
 #: The alternative's ladder here: ``bench rival``'s up to 32 spp (``auto``
 #: takes less than half a full render on every scene).
@@ -122,8 +124,7 @@ def main():
     parser.add_argument("--scenes", nargs="+", default=[*GALLERY_SCENES, "paper_fig1"])
     parser.add_argument("--out", help="also write NAME.csv here (--name)")
     parser.add_argument("--name", default="fresh_default")
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
     if args.out:  # (made now: not a lost run at the end)
         Path(args.out).mkdir(parents=True, exist_ok=True)

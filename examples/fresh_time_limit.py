@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gallery_scenes import add_truths
+
 ROOT = Path(__file__).resolve().parents[1]
 LIMITS = (0.1, 0.25, 0.5)
 
@@ -82,8 +84,7 @@ def main():
                         help="each limit's process with an empty kernel cache")
     parser.add_argument("--errors", action="store_true",
                         help="also each image's error over the alternative's best within the limit")
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
     from mitsuba_mrt.bench.experiments import GALLERY_SCENES
 

@@ -24,19 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gallery_scenes import add_truths, load
+
 ROOT = Path(__file__).resolve().parents[1]
 LADDER = (2, 4, 8, 16, 32)
-
-
-def load(name: str, res: int):
-    import mitsuba_mrt
-    from mitsuba_mrt.bench.experiments import gallery_defines
-
-    if name == "paper_fig1":
-        return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "paper_fig1.xml", res=res,
-                                      integrator="path", spp=64, jitter="true")
-    return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
-                                  **gallery_defines(name, res))
 
 
 def at_equal_time(curve: list[tuple[float, float]], seconds: float) -> float:
@@ -62,8 +53,7 @@ def main():
     parser.add_argument("--spread", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--spp", type=int, default=64)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
 
     import time

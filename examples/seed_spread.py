@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from gallery_scenes import add_truths, load
 
 
 def main():
@@ -27,12 +27,10 @@ def main():
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--res", type=int, default=256)
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
 
     import mitsuba_mrt
-    from grid_spread import load  # (the gallery scene, or Fig. 1 with path)
     from mitsuba_mrt import runtime
     from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from gallery_scenes import add_truths, load
 
 
 def main():
@@ -26,13 +26,11 @@ def main():
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--seeds", type=int, default=4)
-    parser.add_argument("--truths", default=str(ROOT / "docs" / "bench" / "cache"),
-                        help="folder of the converged renders bench rival keeps")
+    add_truths(parser)
     args = parser.parse_args()
 
     import mitsuba_mrt
     from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.experiments import gallery_defines
     from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.denoise import denoise_image, denoise_shading, textured_pixels
     from mitsuba_mrt.recon.metrics import paper_error
@@ -45,8 +43,7 @@ def main():
     runtime.configure()
     mitsuba_mrt.activate("auto")
     for name in args.scenes:
-        scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
-                                       **gallery_defines(name, args.res))
+        scene = load(name, args.res)
         truth = kept_truth(scene, name, Path(args.truths))["box"]
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())

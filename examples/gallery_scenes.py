@@ -1,0 +1,28 @@
+"""What the examples measured against ``bench rival``'s converged renders share:
+a scene by its gallery name, and the ``--truths`` option naming where those
+renders are kept."""
+
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Where ``python -m mitsuba_mrt bench rival -o docs/bench`` keeps its converged renders.
+TRUTHS = ROOT / "docs" / "bench" / "cache"
+
+
+def add_truths(parser) -> None:
+    """Add ``--truths`` (a folder; :data:`TRUTHS` by default) to ``parser``."""
+    parser.add_argument("--truths", default=str(TRUTHS),
+                        help="folder of the converged renders bench rival keeps")
+
+
+def load(name: str, res: int):
+    """Gallery scene ``name`` at ``res`` pixels a side (``paper_fig1``: the
+    report's Fig. 1 with ``path`` at 64 spp, as ``bench rival`` renders it)."""
+    import mitsuba_mrt
+    from mitsuba_mrt.bench.experiments import gallery_defines
+
+    if name == "paper_fig1":
+        return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "paper_fig1.xml", res=res,
+                                      integrator="path", spp=64, jitter="true")
+    return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
+                                  **gallery_defines(name, res))
