@@ -12,6 +12,11 @@ import pytest
 
 import mitsuba_mrt
 
+# The suite plans from what its own process measures: never from, nor into,
+# what the user's earlier renders remembered (mitsuba_mrt.runtime.memory);
+# the CLI's subprocesses inherit it.  Tests of the memory give it a file.
+os.environ["MITSUBA_MRT_MEMORY"] = "off"
+
 
 _variant: list[str] = []  # the session's variant, set by pytest_configure
 

@@ -49,7 +49,7 @@ from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from . import kept_plans
 from .auto_limit import (TIME_MARGIN, kept_cost, note_final_denoise, note_first_round,
-                         plan_within)
+                         plan_within, remember_launches)
 from .auto_plans import HOME_MIN_SPP, AutoOutcome, Traced, find_surfaces, mrt_by_kind
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
@@ -201,6 +201,7 @@ def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
         full_spp=spp, area=effective_area(tracer.sensor.film().rfilter()), denoise=denoise,
         stop_early=weighing if escape else None, on_round=on_round, surfaces=surfaces,
         cost=kept_cost(job.key, tracer))
+    remember_launches(job.key, tracer)
     if image is None:
         return AutoOutcome(weighing.plan)
     if deadline is not None and denoise:
@@ -297,6 +298,7 @@ def _again(scene, tracer, key: tuple, kept_key: tuple, width: int, height: int,
         tracer, width, height, quality=choice.quality, target_error=None, deadline=None,
         max_spp=choice.spp, full_spp=tracer.spp, area=1.0, surfaces=surfaces,
         on_round=on_round, cost=kept_cost(key, tracer), fixed=True)
+    remember_launches(key, tracer)
     plan.choice = replace(choice, seconds=progress.trace_s + progress.denoise_s)
     return AutoOutcome(plan, image, alpha, progress)
 

@@ -20,6 +20,7 @@ from typing import NamedTuple
 from ..modes.plan import Candidate, Plan
 from ..recon.denoise import denoise_seconds, expected_seconds, preset, prior_seconds
 from ..recon.sampling import SamplePattern
+from ..runtime import memory
 from ..runtime.jit import kernel_seconds
 from ..runtime.recent import keep, note, typical
 from ..types import MRTParams, SeedStream, SparseTrace
@@ -29,7 +30,7 @@ from .auto_plans import (EDGE_TESTED, HOME, HOME_MIN_SPP, AutoOutcome, Traced, e
 from .preview import preview_grid
 from .launch_cost import LaunchCost
 from .replay import recordings
-from .scene_query import sampler_bakes_spp, textured_diffuse_shapes
+from .scene_query import description_key, sampler_bakes_spp, textured_diffuse_shapes
 
 #: The share of a time limit the passes may plan to fill (the final OIDN
 #: call's time is planned within it; the rest is for the machine's noise and
@@ -122,6 +123,9 @@ _final_denoise_s: dict = {}
 #: the next render's passes plan from.
 _launch_costs: dict = {}
 KEPT_COSTS = 16
+#: Per the same keys (the last :data:`KEPT_COSTS`), the key of the scene in
+#: what earlier processes measured (:func:`_memory_key`).
+_memory_keys: dict = {}
 #: What the grid probe took beyond its kernels when it recorded them, per
 #: the same keys (the last :data:`KEPT_COSTS`): about what the passes' first
 #: launch adds by recording theirs (both trace the integrator anew), which
@@ -188,14 +192,37 @@ def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
 
 
 def kept_cost(key: tuple, tracer) -> LaunchCost:
-    """The launches kept for ``key`` (new where there are none, of
+    """The launches kept for ``key`` (where there are none, those an earlier
+    process remembered, :func:`remember_launches`, else none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
     launches of 1 and 2 spp among its :attr:`~.launch_cost.LaunchCost.replays`
     where another trace recorded their layout (a full render denoised)."""
-    cost = _keep(_launch_costs, key, _launch_costs.get(key) or LaunchCost(
-        spp_compiles=sampler_bakes_spp(tracer.sensor.sampler())))
+    cost = _launch_costs.get(key)
+    if cost is None:
+        bakes = sampler_bakes_spp(tracer.sensor.sampler())
+        recalled = memory.recall(_memory_key(key, tracer)) if memory.enabled() else None
+        cost = LaunchCost.from_memory(recalled, bakes) or LaunchCost(spp_compiles=bakes)
+    cost = _keep(_launch_costs, key, cost)
     cost.replays = frozenset(spp for spp in (1, 2) if tracer.pass_recorded(spp))
     return cost
+
+
+def remember_launches(key: tuple, tracer) -> None:
+    """Keep the launches of ``key`` (:data:`_launch_costs`) for later
+    processes that render the same scene (:mod:`mitsuba_mrt.runtime.memory`)."""
+    cost = _launch_costs.get(key)
+    if cost is not None and cost.launched_here and memory.enabled():
+        memory.remember(_memory_key(key, tracer), cost.memory())
+
+
+def _memory_key(key: tuple, tracer) -> str:
+    """The key of ``key``'s scene (:func:`~.auto.scene_key`: the traced objects
+    and the pixel count) in the memory of earlier processes (:func:`.scene_query.description_key`),
+    worked out once per process (:data:`_memory_keys`)."""
+    known = _memory_keys.get(key)
+    if known is None:
+        known = description_key(tracer.scene, tracer.sensor, tracer.integrator, key[-1])
+    return _keep(_memory_keys, key, known)
 
 
 def note_first_round(key: tuple, seconds: float) -> None:
@@ -319,8 +346,9 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
     preview = Plan(PREVIEW, PREVIEW_REASON, time_limit=limit, notes=notes)
     first_s = _first_round_s.get(key)
     launches = kept_cost(key, tracer)
-    if first_s is None and launches.replayed:
-        # earlier passes measured a pass (a probe can record its kernels anew)
+    if first_s is None and (launches.replayed or launches.recalled):
+        # earlier passes measured a pass (a probe can record its kernels anew), or
+        # an earlier process's did, its first launch what this one's will take
         first_s = time.perf_counter() - started + launches(launches.cheapest())
     textured = bool(textured_diffuse_shapes(scene).any())
     if first_s is not None:
@@ -447,7 +475,7 @@ def _passes_recording_s(key: tuple, probed: "_Probe") -> float:
         _keep(_probe_recording_s, key, probed.host - probed.compile)
         return 0.0
     launches = _launch_costs.get(key)
-    if launches is not None and (launches.launches or 1 in launches.replays):
+    if launches is not None and (launches.launched_here or 1 in launches.replays):
         return 0.0
     return max(_probe_recording_s.get(key, 0.0) - probed.host, 0.0)
 

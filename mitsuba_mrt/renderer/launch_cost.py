@@ -62,9 +62,10 @@ class Launch(NamedTuple):
     """One launch of passes, as :class:`LaunchCost` keeps it: its spp and
     seconds, whether it recorded its kernels' replay (:mod:`.replay`), its
     trace kernels' run time (:attr:`~mitsuba_mrt.runtime.jit.KernelSeconds.widest`),
-    what recording added to it (None: not measured) and
-    whether it was the first launch its cost saw (whose recording also paid
-    for first uses)."""
+    whether it was the first launch its process made of the scene (whose
+    recording also paid for first uses), what recording added to it (None:
+    not measured) and whether an earlier process made it (``elsewhere``:
+    :mod:`mitsuba_mrt.runtime.memory`; this process records its class anew)."""
 
     spp: int
     seconds: float
@@ -72,6 +73,7 @@ class Launch(NamedTuple):
     execute: float | None = None
     first: bool = False
     recording: float | None = None
+    elsewhere: bool = False
 
 
 @dataclass
@@ -135,6 +137,17 @@ class LaunchCost:
     >>> cost = LaunchCost([(1, 0.02, False), (4, 0.05, False)], spp_compiles=True)
     >>> cost.fits(0.1), cost.cheapest(), cost(2)
     (4, 1, inf)
+
+    Launches an earlier process made (:meth:`from_memory`) tell the line, and
+    every class records anew, at what that process's first launch took
+    beyond the line (recording and first uses); where a new spp compiles,
+    theirs are on disk:
+
+    >>> cost = LaunchCost.from_memory({"spp_compiles": True, "launches": [
+    ...     [1, 0.15, True, 0.04, True, 0.1], [1, 0.045, False, 0.033, False, None],
+    ...     [9, 0.27, False, 0.25, False, None]]}, spp_compiles=True)
+    >>> round(cost(9), 3), cost.first(0.4), cost.first(0.3), cost.cheapest()
+    (0.375, 9, 1, 1)
     """
 
     launches: list = field(default_factory=list)
@@ -151,6 +164,34 @@ class LaunchCost:
     def __post_init__(self):
         self.launches = [Launch(*launch) for launch in self.launches]
 
+    def memory(self) -> dict:
+        """The launches, as :mod:`mitsuba_mrt.runtime.memory` keeps them for
+        later processes (:meth:`from_memory`)."""
+        return {"spp_compiles": self.spp_compiles,
+                "launches": [list(launch[:6]) for launch in self.launches]}
+
+    @classmethod
+    def from_memory(cls, value: dict | None, spp_compiles: bool) -> "LaunchCost | None":
+        """The cost :meth:`memory` kept, its launches made ``elsewhere``; None
+        where ``value`` is not such a record, or is of a sampler that
+        ``spp_compiles`` differently."""
+        try:
+            if value["spp_compiles"] is not spp_compiles:
+                return None
+            launches = [Launch(int(spp), float(seconds), bool(recorded),
+                               None if execute is None else float(execute), bool(first),
+                               None if recording is None else float(recording), True)
+                        for spp, seconds, recorded, execute, first, recording
+                        in value["launches"]]
+        except (KeyError, TypeError, ValueError):
+            return None
+        numbers = [v for launch in launches for v in (launch.seconds, launch.execute,
+                                                       launch.recording) if v is not None]
+        if not launches or any(launch.spp < 1 for launch in launches) or not all(
+                math.isfinite(v) and v >= 0.0 for v in numbers):
+            return None
+        return cls(launches[-KEPT_LAUNCHES:], spp_compiles)
+
     def add(self, spp: int, seconds: float, recorded: bool = False,
             compile_s: float = 0.0, execute_s: float | None = None,
             recording_s: float | None = None) -> None:
@@ -159,7 +200,7 @@ class LaunchCost:
         recording its kernels' replay, to which a new spp's compilation adds
         where ``spp_compiles``), the first if the cost holds none; only the
         last :data:`KEPT_LAUNCHES` are kept."""
-        first = not self.launches
+        first = not self.launched_here
         if not self.spp_compiles:
             seconds -= compile_s
         elif recording_s is not None:
@@ -199,6 +240,16 @@ class LaunchCost:
         return fixed, float(((seconds - fixed) / spp).max())
 
     @property
+    def launched_here(self) -> bool:
+        """Whether this process made a launch of the cost (not only an earlier one)."""
+        return any(not launch.elsewhere for launch in self.launches)
+
+    @property
+    def recalled(self) -> bool:
+        """Whether the cost holds launches of an earlier process (:meth:`from_memory`)."""
+        return any(launch.elsewhere for launch in self.launches)
+
+    @property
     def replayed(self) -> bool:
         """Whether some launch replayed its kernels (the line is a launch's cost)."""
         return not all(launch.recorded for launch in self.launches)
@@ -211,10 +262,11 @@ class LaunchCost:
         than a first launch where another recorded (its recording also paid
         for first uses, once); 0 where no launch recorded, or every launch
         did and none measured it."""
-        recorded = [launch for launch in self.launches if launch.recorded]
-        recorded = [launch for launch in recorded if not launch.first] or recorded
+        recorded = [launch for launch in self.launches if launch.recorded
+                    and not launch.elsewhere]
         if not recorded:
-            return 0.0
+            return self._first_record_s()
+        recorded = [launch for launch in recorded if not launch.first] or recorded
         last = recorded[-1]
         if last.recording is not None:
             return last.recording
@@ -223,19 +275,34 @@ class LaunchCost:
         fixed, per_spp = self._line()
         return max(last.seconds - fixed - per_spp * last.spp, 0.0)
 
-    def _new(self, spp: int) -> bool:
-        """Whether a launch of ``spp`` records anew: no launch, nor
-        :attr:`replays`, had an spp of its recording class."""
+    def _first_record_s(self) -> float:
+        """:attr:`record_s` before this process recorded: what the first
+        launch of an earlier process (``elsewhere``) took beyond the line
+        (its recording and first uses, as this process's first launch
+        will), at least its measured recording; 0 where none recorded."""
+        fixed, per_spp = self._line()
+        recorded = [launch for launch in self.launches if launch.recorded]
+        recorded = [launch for launch in recorded if launch.first] or recorded
+        return max((max(launch.seconds - fixed - per_spp * launch.spp, launch.recording or 0.0)
+                    for launch in recorded), default=0.0)
+
+    def _new(self, spp: int, anywhere: bool = False) -> bool:
+        """Whether a launch of ``spp`` records anew: no launch of this
+        process (``anywhere``: of any process), nor :attr:`replays`, had an
+        spp of its recording class."""
         kind = spp_class(spp, self.spp_compiles)
+        launched = [launch.spp for launch in self.launches if anywhere or not launch.elsewhere]
         return all(kind != spp_class(other, self.spp_compiles)
-                   for other in [*self.replays, *(launch.spp for launch in self.launches)])
+                   for other in [*self.replays, *launched])
 
     def _unplanned(self, spp: int) -> bool:
-        """Whether ``spp`` is not planned: a new spp (not in :attr:`replays`)
-        where it compiles (``spp_compiles``) and some spp has been launched.  Whether its
+        """Whether ``spp`` is not planned: where a new spp compiles
+        (``spp_compiles``) and some spp has been launched, one that no launch,
+        of this process or an earlier one, nor :attr:`replays` had.  Whether its
         kernels come from Dr.Jit's disk cache or compile (several seconds
-        for some scenes) no recording tells."""
-        return self.spp_compiles and bool(self.launches) and self._new(spp)
+        for some scenes) no recording tells; an earlier process's launch put
+        them there."""
+        return self.spp_compiles and bool(self.launches) and self._new(spp, anywhere=True)
 
     def __call__(self, spp: int) -> float:
         """Seconds a launch of ``spp`` is expected to take (recorded anew
@@ -245,8 +312,8 @@ class LaunchCost:
         if self._unplanned(spp):
             return math.inf
         fixed, per_spp = self._line()
-        line = fixed + per_spp * spp + (self.record_s if self._new(spp) else 0.0)
-        return min(line, self._replay_of(spp))
+        anew = self.record_s if self._new(spp) else 0.0  # (an earlier process's spp too)
+        return min(fixed + per_spp * spp, self._replay_of(spp)) + anew
 
     def _replay_of(self, spp: int) -> float:
         """The least seconds a launch of ``spp`` took, less what recording took

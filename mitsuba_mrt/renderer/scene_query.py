@@ -10,6 +10,7 @@ here traces a ray: it reads the scene's shapes, BSDFs and emitters.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from typing import Callable
 
@@ -49,6 +50,18 @@ def _any_bsdf_with(scene: mi.Scene, flag: mi.BSDFFlags) -> bool:
         return bsdf is not None and mi.has_flag(int(bsdf.flags()), flag)
 
     return any(shows(scene, lambda shape: has(shape.bsdf()), any))
+
+
+def description_key(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
+                    pixels: int) -> str:
+    """A digest of what a trace of ``pixels`` pixels of ``scene`` through
+    ``sensor`` with ``integrator`` is made of (Mitsuba's description of
+    each, the variant and Mitsuba's and Dr.Jit's versions): the same in
+    every process that loads the same scene with the same parameters, a key
+    for what earlier processes measured (:mod:`mitsuba_mrt.runtime.memory`)."""
+    text = "\n".join([mi.variant(), mi.__version__, dr.__version__, str(scene), str(sensor),
+                      str(integrator), str(int(pixels))])
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
 def sampler_bakes_spp(sampler: mi.Sampler) -> bool:

@@ -30,6 +30,7 @@ def clear_caches() -> None:
     auto_limit._first_round_s.clear()
     auto_limit._final_denoise_s.clear()
     auto_limit._launch_costs.clear()
+    auto_limit._memory_keys.clear()
     auto_limit._probe_recording_s.clear()
     auto_limit._probe_execute.clear()
     auto_limit._preview_after_s.clear()

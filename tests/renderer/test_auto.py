@@ -604,6 +604,62 @@ def test_a_first_time_limit_far_above_oidn_is_not_probed(scene, monkeypatch):
         1e-3, int(pixels[0] * pixels[1]), "fast")  # (a short limit asks the probe)
 
 
+def test_a_new_process_plans_a_time_limit_from_what_an_earlier_one_remembered(
+        scene, tmp_path, monkeypatch):
+    from mitsuba_mrt.renderer.state import clear_caches
+
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)  # (the limit asks the probe)
+    monkeypatch.setattr(auto_limit, "unmeasured_plan", lambda *args: None)  # (no MRT plan)
+    clear_caches()  # (a process that rendered nothing yet)
+    first = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert first.auto.choice.kind == "denoised"
+    (remembered,) = (cost.launches for cost in auto_limit._launch_costs.values())
+    clear_caches()  # the next process: its own launches none, its probe not needed
+
+    def probe(*args):
+        raise AssertionError("the grid was probed")
+    monkeypatch.setattr(auto_limit, "_grid_probe", probe)
+    again = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert again.auto.choice.kind == "denoised"
+    (cost,) = auto_limit._launch_costs.values()  # (the objects' token is new: their key too)
+    recalled = [launch for launch in cost.launches if launch.elsewhere]
+    assert [launch[:6] for launch in recalled] == [launch[:6] for launch in remembered]
+    here = [launch for launch in cost.launches if not launch.elsewhere]
+    assert here[0].recorded and here[0].first  # (this process's first launch records anew)
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")  # nothing recalled: the probe is asked
+    clear_caches()
+    with pytest.raises(AssertionError, match="probed"):
+        mitsuba_mrt.render(scene, time_limit=10.0)
+
+
+def test_a_remembered_cost_is_taken_only_whole_and_of_the_same_kind_of_sampler():
+    good = {"spp_compiles": False, "launches": [[2, 0.06, True, 0.03, True, 0.02],
+                                                [8, 0.12, False, 0.1, False, None]]}
+    cost = launch_cost.LaunchCost.from_memory(good, spp_compiles=False)
+    assert cost.recalled and not cost.launched_here and cost.replayed
+    assert cost.memory() == good  # (what a later process keeps again)
+    # the first launch here records anew: at what the earlier first launch took
+    # beyond the line (its recording and first uses, at least its recording)
+    fixed, per_spp = cost._line()
+    assert cost.record_s == pytest.approx(max(0.06 - fixed - 2 * per_spp, 0.02))
+    assert cost(2) == pytest.approx(0.06)  # (what that launch took)
+    assert cost(8) == pytest.approx(0.12 + cost.record_s)
+    cost.add(4, 0.07, recorded=True, recording_s=0.01)
+    assert cost.launched_here and cost.launches[-1].first and not cost.launches[-1].elsewhere
+    assert cost.record_s == pytest.approx(0.01)  # (now this process's own recording)
+    fixed, per_spp = cost._line()  # (a 16-spp launch replays the class recorded here)
+    assert cost(16) == pytest.approx(fixed + 16 * per_spp)
+    for bad in (None, {}, {"spp_compiles": True, "launches": good["launches"]},
+                {"spp_compiles": False, "launches": []},
+                {"spp_compiles": False, "launches": [[0, 0.1, False, None, False, None]]},
+                {"spp_compiles": False, "launches": [[1, -1.0, False, None, False, None]]},
+                {"spp_compiles": False, "launches": [[1, "x", False, None, False, None]]},
+                {"spp_compiles": False, "launches": [[1, 0.1, False]]},
+                {"spp_compiles": False, "launches": [[1, float("nan"), False, None, False, None]]}):
+        assert launch_cost.LaunchCost.from_memory(bad, spp_compiles=False) is None
+
+
 def test_a_slow_first_round_gives_one_preview_not_previews_for_good(scene, monkeypatch):
     monkeypatch.setattr(auto_limit, "_launch_costs", {})
     monkeypatch.setattr(auto_limit, "_first_round_s", {})
