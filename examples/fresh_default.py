@@ -19,6 +19,12 @@ from, or kept in, ``--truths``).  Printed per scene: ``auto``'s time over
 the full render's (medians), its plan, and its error over the
 alternative's at that time (interpolated on the alternative's curve, as
 ``bench rival`` does).  Modules' bytecode is kept as for a user's Python.
+
+``auto`` renders twice per round, each in a fresh process, with a memory
+of earlier processes (:mod:`mitsuba_mrt.runtime.memory`) that starts empty
+every round: ``auto``, a scene's first render, chooses its plan and
+remembers it; ``auto-again``, the user's next render of the scene, takes
+it.  Every other child runs with the memory off.
 """
 
 import argparse
@@ -67,8 +73,10 @@ print(json.dumps({"seconds": seconds, "used": used, "chose": chose}))
 """
 
 
-def _child(path: Path, method: str, defines: dict, folder: str) -> tuple[dict, np.ndarray]:
-    env = dict(os.environ)
+def _child(path: Path, method: str, defines: dict, folder: str,
+           memory: str = "off") -> tuple[dict, np.ndarray]:
+    """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``)."""
+    env = dict(os.environ, MITSUBA_MRT_MEMORY=memory)
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # (as a user's Python: bytecode kept)
     image_path = os.path.join(folder, "image.npy")
     out = subprocess.run([sys.executable, "-c", CHILD, str(path), method, json.dumps(defines),
@@ -89,12 +97,17 @@ def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> 
 
     scene = load_scene(str(path), **defines)
     truth = kept_truth(scene, name, truths)
-    methods = ["full", "auto"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
+    methods = ["full", "auto", "auto-again"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
     runs = {m: [] for m in methods}
     with tempfile.TemporaryDirectory() as folder:
+        remembered = os.path.join(folder, "memory.json")
         for _ in range(rounds):
+            if os.path.exists(remembered):  # (each round's first render remembers nothing)
+                os.remove(remembered)
             for method in methods:
-                report, image = _child(path, method, defines, folder)
+                auto = method.startswith("auto")
+                report, image = _child(path, "auto" if auto else method, defines, folder,
+                                       remembered if auto else "off")
                 kind = "box" if report["used"] == "full+oidn" else "film"
                 runs[method].append((report["seconds"], paper_error(image, truth[kind]),
                                      report["chose"],
@@ -140,13 +153,13 @@ def main():
             defines = gallery_defines(name, args.res)
         mine = measure(path, name, defines, args.rounds, Path(args.truths))
         rows += mine
-        auto = next(r for r in mine if r.method == "auto")
         full = next(r for r in mine if r.method == "full")
-        ratio = auto.error / alternative_at(mine, auto.relative_time)
-        mse = auto.mse / alternative_at(mine, auto.relative_time, "mse")
-        print(f"{name}: full {full.seconds:.3f} s; auto {auto.relative_time:.2f} of it, "
-              f"error {ratio:.2f}x (noise-free MSE {mse:.2f}x) the alternative's at that time "
-              f"({auto.chose})", flush=True)
+        for auto in (r for r in mine if r.method.startswith("auto")):
+            ratio = auto.error / alternative_at(mine, auto.relative_time)
+            mse = auto.mse / alternative_at(mine, auto.relative_time, "mse")
+            print(f"{name}: full {full.seconds:.3f} s; {auto.method} {auto.relative_time:.2f} "
+                  f"of it, error {ratio:.2f}x (noise-free MSE {mse:.2f}x) the alternative's at "
+                  f"that time ({auto.chose})", flush=True)
     if args.out:
         with open(Path(args.out) / f"{args.name}.csv", "w", newline="") as f:
             writer = csv.writer(f)

@@ -15,6 +15,12 @@ cache (its own ``HOME``) and compiles every kernel it uses: what a first run
 on a new machine pays.  The full renders keep the cache, so that the limits
 are the same shares of a full render's usual time.
 
+Each limit renders twice, each in a fresh process, with a memory of
+earlier processes (:mod:`mitsuba_mrt.runtime.memory`) that starts empty
+for every limit: ``first``, a scene's first render, measures what it
+needs and remembers its launches; ``again``, the user's next render of the
+scene at that limit, plans from them.
+
 With ``--errors`` each limit's image is kept, and the alternative's ladder
 (every pixel at 1-32 spp, box filter, OIDN ``fast`` and ``high``: what
 ``bench rival`` calls the alternative done right) is rendered once per
@@ -63,8 +69,10 @@ else:
 """
 
 
-def _child(path: Path, limit: str, res: int, cold: bool = False, image: str = "-") -> dict:
-    env = dict(os.environ)
+def _child(path: Path, limit: str, res: int, cold: bool = False, image: str = "-",
+           memory: str = "off") -> dict:
+    """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``)."""
+    env = dict(os.environ, MITSUBA_MRT_MEMORY=memory)
     # as a user's Python: the package's modules compiled once, their bytecode
     # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
@@ -95,11 +103,14 @@ def main():
         for share in LIMITS:
             with tempfile.TemporaryDirectory() as folder:
                 image = os.path.join(folder, "image.npy") if errors else "-"
-                run = _child(path, str(share * full), args.res, args.cold_cache, image)
-                error = "" if errors is None else errors.line(run, image, share * full)
-            print(f"{name}: full {full:.3f} s; limit {share}: "
-                  f"{run['seconds'] / (share * full):.2f}x the limit{error} ({run['chose']})",
-                  flush=True)
+                remembered = os.path.join(folder, "memory.json")
+                for render in ("first", "again"):
+                    run = _child(path, str(share * full), args.res, args.cold_cache, image,
+                                 remembered)
+                    error = "" if errors is None else errors.line(run, image, share * full)
+                    print(f"{name}: full {full:.3f} s; limit {share}, {render}: "
+                          f"{run['seconds'] / (share * full):.2f}x the limit{error} "
+                          f"({run['chose']})", flush=True)
 
 
 class _Errors:

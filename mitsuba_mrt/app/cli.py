@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import sys
 import warnings
 
@@ -225,6 +226,9 @@ def _bench(args) -> int:
     from ..bench import run_experiment, summary_line
 
     command = "python -m mitsuba_mrt " + shlex.join(args.argv)
+    # a benchmark plans from what its own process measures, not from what the
+    # user's earlier renders remembered (runtime.memory), unless told to
+    os.environ.setdefault("MITSUBA_MRT_MEMORY", "off")
     if args.experiment == "rival":
         return _rival(args, command)
     with contextlib.ExitStack() as stack:

@@ -284,9 +284,10 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
         key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
-        kept_plans.note_checked(key + auto.plan_key(tracer, params), plan.choice, plan.reason,
+        key += auto.plan_key(tracer, params)
+        kept_plans.note_checked(key, plan.choice, plan.reason,
                                 result.timings.total - held.seconds, result.timings,
-                                recording_s)
+                                recording_s, auto_limit.plan_memory_key(key, tracer))
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

@@ -49,7 +49,7 @@ from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from . import kept_plans
 from .auto_limit import (TIME_MARGIN, kept_cost, note_final_denoise, note_first_round,
-                         plan_within, remember_launches)
+                         plan_memory_key, plan_within, remember_launches)
 from .auto_plans import HOME_MIN_SPP, AutoOutcome, Traced, find_surfaces, mrt_by_kind
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
@@ -86,6 +86,8 @@ PROBE_SIDE = 16
 
 #: The reason of a plan :func:`_again` takes (``{}``: the kept plan's).
 AGAIN_REASON = "{}; kept from this process's earlier render of the scene"
+#: ... where an earlier process's render of the scene chose it (:mod:`mitsuba_mrt.runtime.memory`).
+RECALLED_REASON = "{}; remembered from an earlier process's render of the scene"
 
 
 def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
@@ -218,7 +220,8 @@ def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
                 passes=list(progress.history))
     if limit is None and params.noise_threshold is None and denoise:
         # (the next default render of the scene takes them again)
-        kept_plans.note_passes(job.kept_key, choice, plan.reason)
+        kept_plans.note_passes(job.kept_key, choice, plan.reason,
+                               plan_memory_key(job.kept_key, tracer))
     if weighing.plan is not None:  # (the planner chose the passes, which went on)
         plan.reason, plan.candidates = weighing.plan.reason, weighing.plan.candidates
     return AutoOutcome(plan, image, alpha, progress, id_pass=traced.id_pass)
@@ -281,16 +284,18 @@ def _again(scene, tracer, key: tuple, kept_key: tuple, width: int, height: int,
            notes: list, on_round) -> AutoOutcome | None:
     """Under the default target: the plan an earlier default render of
     ``kept_key`` (``key``, :func:`scene_key`, and :func:`plan_key`) in this
-    process kept (:func:`~.kept_plans.plan_again`), without the probes, the
+    process kept, or one in an earlier process remembered
+    (:func:`~.kept_plans.plan_again`), without the probes, the
     check or the estimates that chose it; an MRT plan to be rendered (its
     time kept for ``kept_key``), the passes' image at their kept spp and
     preset (their launch kept for ``key``'s time-limited passes,
     :func:`kept_cost`); else None."""
-    kept = kept_plans.plan_again(kept_key)
+    kept = kept_plans.plan_again(kept_key, plan_memory_key(kept_key, tracer))
     if kept is None:
         return None
-    choice, reason = kept
-    plan = Plan(choice, AGAIN_REASON.format(reason), notes=notes)
+    choice, reason, recalled = kept
+    plan = Plan(choice, (RECALLED_REASON if recalled else AGAIN_REASON).format(reason),
+                notes=notes)
     if choice.kind == "mrt":
         return AutoOutcome(plan, kept_key=kept_key)
     surfaces = find_surfaces(scene, tracer, width, height) if choice.shading else None

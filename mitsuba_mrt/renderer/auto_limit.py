@@ -13,6 +13,7 @@ per scene key, to plan the next one.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import replace
 from typing import NamedTuple
@@ -213,6 +214,17 @@ def remember_launches(key: tuple, tracer) -> None:
     cost = _launch_costs.get(key)
     if cost is not None and cost.launched_here and memory.enabled():
         memory.remember(_memory_key(key, tracer), cost.memory())
+
+
+def plan_memory_key(kept_key: tuple, tracer) -> str | None:
+    """The key of a kept plan's key (:func:`~.auto.scene_key` and
+    :func:`~.auto.plan_key`) in the memory of earlier processes: its scene's
+    (:func:`_memory_key`) and a digest of its spp and parameters; None where
+    the memory is off."""
+    if not memory.enabled():
+        return None
+    rest = hashlib.sha256(repr(kept_key[2:]).encode()).hexdigest()[:16]
+    return f"{_memory_key(kept_key[:2], tracer)}/plan/{rest}"
 
 
 def _memory_key(key: tuple, tracer) -> str:

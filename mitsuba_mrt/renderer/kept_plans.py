@@ -8,7 +8,10 @@ default render whose denoised passes ended notes their spp, OIDN preset
 and whether the textures were denoised as shading.  A later default
 render of the same key (traced objects, pixels, spp, parameters) takes
 that plan again (:func:`plan_again`), without the probes, the check or
-the passes' estimates that chose it.
+the passes' estimates that chose it.  The plan (not what it took) is also
+remembered for later processes (:mod:`mitsuba_mrt.runtime.memory`, under
+the ``memory_key`` its callers give): a user's next process renders the
+scene as a warm one would.
 
 A later time-limited render of the same key takes a kept MRT plan,
 unchecked, at the most spp whose expected time ends within the limit
@@ -30,9 +33,10 @@ there only the spp rendered before count.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 from ..modes.plan import Candidate
+from ..runtime import memory
 from ..runtime.recent import keep, note, typical
 
 #: Plans kept, of the last this many keys (traced objects, pixels, spp, parameters).
@@ -98,6 +102,8 @@ class KeptPlan:
     reason: str
     seconds: dict = field(default_factory=dict)
     growing: list = field(default_factory=list)
+    #: Whether an earlier process remembered it (:func:`plan_again`).
+    recalled: bool = False
 
     def expected(self, spp: int) -> float:
         """Seconds a render at ``spp`` is expected to take (see the module)."""
@@ -140,13 +146,14 @@ def spp_ladder(least: int, most: int) -> list[int]:
 
 
 def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
-                 timings, recording_s: float = 0.0) -> None:
+                 timings, recording_s: float = 0.0, memory_key: str | None = None) -> None:
     """Keep what a render of ``choice`` (a plan its check kept, at its spp)
     took for ``key``: ``seconds`` (its check left out) and the share of
     them the growing traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`)
     took, both less ``recording_s``, what recording its traces' replays
     took (:func:`~.replay.recording_seconds`; a replay takes none of it).
-    Another plan for ``key`` starts anew."""
+    Another plan for ``key`` starts anew; the plan is remembered under
+    ``memory_key`` (:func:`_remember`)."""
     kept = _plans.get(key)
     if kept is None or kept.choice.name != choice.name:  # (the key holds the spp)
         kept = KeptPlan(choice, reason)
@@ -158,12 +165,45 @@ def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
     note(kept.growing, min(max(growing, 0.0) / replayed, 1.0) if replayed > 0 else 0.0,
          PLAN_CALLS)
     keep(_plans, key, kept, KEPT_PLANS)
+    _remember(kept, memory_key)
 
 
-def note_passes(key: tuple, choice: Candidate, reason: str) -> None:
+def note_passes(key: tuple, choice: Candidate, reason: str,
+                memory_key: str | None = None) -> None:
     """Keep ``choice``, the denoised passes a default render of ``key`` ended
-    with (their spp, preset and shading), and its ``reason``."""
-    keep(_plans, key, KeptPlan(replace(choice, seconds=None), reason), KEPT_PLANS)
+    with (their spp, preset and shading), and its ``reason``; remembered
+    under ``memory_key`` (:func:`_remember`)."""
+    kept = keep(_plans, key, KeptPlan(replace(choice, seconds=None), reason), KEPT_PLANS)
+    _remember(kept, memory_key)
+
+
+def _remember(kept: KeptPlan, memory_key: str | None) -> None:
+    """Keep ``kept``'s plan and reason for later processes under ``memory_key``
+    (None: not remembered)."""
+    if memory_key is not None and memory.enabled():
+        memory.remember(memory_key, {"choice": asdict(kept.choice), "reason": kept.reason})
+
+
+def _recalled(memory_key: str | None) -> KeptPlan | None:
+    """The plan an earlier process remembered under ``memory_key``, without
+    what it took (this process has not measured it); None where there is none
+    or it is not whole.
+
+    Examples
+    --------
+    >>> _recalled(None) is None
+    True
+    """
+    value = memory.recall(memory_key) if memory_key is not None and memory.enabled() else None
+    try:
+        choice = Candidate(**value["choice"])
+        reason = value["reason"]
+    except (KeyError, TypeError):
+        return None
+    if choice.kind not in ("mrt", "denoised") or not isinstance(reason, str) or (
+            not isinstance(choice.spp, int) or choice.spp < 1):
+        return None
+    return KeptPlan(choice, reason, recalled=True)
 
 
 def note_render(key: tuple, spp: int, seconds: float, replayed: bool) -> None:
@@ -175,19 +215,25 @@ def note_render(key: tuple, spp: int, seconds: float, replayed: bool) -> None:
         note(kept.seconds.setdefault(spp, []), seconds, PLAN_CALLS)
 
 
-def plan_again(key: tuple) -> tuple[Candidate, str] | None:
-    """(the plan kept for ``key``, its reason), or None: what a default
-    render takes again."""
+def plan_again(key: tuple, memory_key: str | None = None
+               ) -> tuple[Candidate, str, bool] | None:
+    """(the plan kept for ``key``, or where none is, the one an earlier
+    process remembered under ``memory_key``; its reason; whether it was
+    remembered so), or None: what a default render takes again."""
     kept = _plans.get(key)
-    return None if kept is None else (kept.choice, kept.reason)
+    if kept is None:
+        kept = _recalled(memory_key)
+        if kept is not None:
+            keep(_plans, key, kept, KEPT_PLANS)
+    return None if kept is None else (kept.choice, kept.reason, kept.recalled)
 
 
 def plan_within(key: tuple, seconds: float, bakes: bool) -> tuple[Candidate, str] | None:
     """(the MRT plan kept for ``key`` at the most spp expected to end within
     ``seconds``, those seconds its own; its reason), or None: see the module."""
     kept = _plans.get(key)
-    if kept is None or kept.choice.kind != "mrt":
-        return None
+    if kept is None or kept.choice.kind != "mrt" or kept.choice.spp not in kept.seconds:
+        return None  # (none, or one recalled that this process has not timed)
     spp = kept.spp_within(seconds, bakes)
     if spp is None:
         return None

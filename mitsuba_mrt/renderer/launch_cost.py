@@ -298,11 +298,14 @@ class LaunchCost:
     def _unplanned(self, spp: int) -> bool:
         """Whether ``spp`` is not planned: where a new spp compiles
         (``spp_compiles``) and some spp has been launched, one that no launch,
-        of this process or an earlier one, nor :attr:`replays` had.  Whether its
-        kernels come from Dr.Jit's disk cache or compile (several seconds
-        for some scenes) no recording tells; an earlier process's launch put
-        them there."""
-        return self.spp_compiles and bool(self.launches) and self._new(spp, anywhere=True)
+        of this process or an earlier one, nor :attr:`replays` had, other
+        than a process's first launch of 1 spp (the launch that measures
+        the line where nothing else is known).  Whether its kernels come
+        from Dr.Jit's disk cache or compile (several seconds for some scenes)
+        no recording tells; an earlier process's launch put them there."""
+        if not (self.spp_compiles and self.launches) or (spp == 1 and not self.launched_here):
+            return False
+        return self._new(spp, anywhere=True)
 
     def __call__(self, spp: int) -> float:
         """Seconds a launch of ``spp`` is expected to take (recorded anew

@@ -516,6 +516,41 @@ def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant
             auto.AGAIN_REASON.format(""))
 
 
+def test_a_new_process_takes_the_default_plan_an_earlier_process_remembered(
+        variant, tmp_path, monkeypatch):
+    from mitsuba_mrt.renderer import api, progressive
+    from mitsuba_mrt.renderer.state import clear_caches
+
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    point_lit = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    area_lit = mi.load_string(scene_xml(384, spp=16))
+    clear_caches()  # (a process that rendered nothing yet)
+    first = {name: mitsuba_mrt.render(s) for name, s in (("mrt", point_lit),
+                                                          ("passes", area_lit))}
+    assert first["mrt"].auto.reason == auto_plans.HOME_REASON and first["passes"].auto.passes
+    clear_caches()  # the next process: nothing kept, the plans remembered
+
+    def not_again(*args, **kwargs):
+        raise AssertionError("the plan was chosen anew")
+    with monkeypatch.context() as m:
+        for module, name in ((auto, "noise_free"), (auto, "mrt_by_kind"),
+                             (progressive, "_estimate"), (api, "check_image")):
+            m.setattr(module, name, not_again)
+        mrt, passes = mitsuba_mrt.render(point_lit), mitsuba_mrt.render(area_lit)
+    assert mrt.auto.reason == auto.RECALLED_REASON.format(auto_plans.HOME_REASON)
+    assert np.array_equal(mrt.image, first["mrt"].image)  # (the same plan, the same seed)
+    assert passes.auto.reason == auto.RECALLED_REASON.format(first["passes"].auto.reason)
+    assert passes.spp == first["passes"].spp and not passes.auto.passes
+    # a time limit does not scale a remembered MRT plan that this process has not timed
+    (kept,) = [k for k in kept_plans._plans.values() if k.choice.kind == "mrt"]
+    assert kept.recalled and kept.seconds == {}
+    assert kept_plans.plan_within(next(k for k, v in kept_plans._plans.items() if v is kept),
+                                  60.0, bakes=False) is None
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")  # nothing remembered: chosen anew
+    clear_caches()
+    assert mitsuba_mrt.render(point_lit).auto.reason == auto_plans.HOME_REASON
+
+
 def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
     forced(monkeypatch, Candidate("fast+oidn", "mrt", 8, mode="fast", denoise=True))
     result = mitsuba_mrt.render(scene)
@@ -543,6 +578,7 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
 
 def test_a_preview_is_denoised_where_the_limit_leaves_oidn_room(scene, monkeypatch):
     monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
+    monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)  # (the preview is asked)
     result = mitsuba_mrt.render(scene, time_limit=10.0)
     assert result.auto.choice.name == auto_limit.PREVIEW.name and result.params.denoise == "oidn"
     assert auto_limit.UNDENOISED_NOTE not in result.auto.notes and result.timings.denoise > 0
@@ -650,6 +686,16 @@ def test_a_remembered_cost_is_taken_only_whole_and_of_the_same_kind_of_sampler()
     assert cost.record_s == pytest.approx(0.01)  # (now this process's own recording)
     fixed, per_spp = cost._line()  # (a 16-spp launch replays the class recorded here)
     assert cost(16) == pytest.approx(fixed + 16 * per_spp)
+    # a sampler that bakes its spp: the spp launched elsewhere are on disk; 1 spp,
+    # a process's measuring first launch, stays open until this process launches
+    baked = launch_cost.LaunchCost.from_memory(
+        {"spp_compiles": True, "launches": [[9, 0.4, True, 0.26, True, 0.1],
+                                            [9, 0.3, False, 0.29, False, None]]},
+        spp_compiles=True)
+    assert baked.cheapest() == 1 and baked(4) == math.inf and baked(9) < math.inf
+    assert baked.first(baked(9)) == 9
+    baked.add(9, 0.45, recorded=True, recording_s=0.1)
+    assert baked(1) == math.inf and baked.cheapest() == 9
     for bad in (None, {}, {"spp_compiles": True, "launches": good["launches"]},
                 {"spp_compiles": False, "launches": []},
                 {"spp_compiles": False, "launches": [[0, 0.1, False, None, False, None]]},
