@@ -28,6 +28,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..errors import MRTError
+from ..runtime import memory
 from ..runtime.recent import note, typical
 from .compose import safe_albedo
 
@@ -69,7 +70,8 @@ MISSING = ('denoise="oidn" needs Intel Open Image Denoise: '
 _lock = threading.Lock()
 # "device"; "filters": (quality, guides, clean_aux, shape) -> RT filter;
 # "recent": quality -> {pixels: seconds of the last RECENT_CALLS calls at that
-# size, each its filter's set-up left out}
+# size, each its filter's set-up left out}; "first calls": (quality, pixels) ->
+# what earlier processes' first calls took (runtime.memory), read once
 _state: dict = {}
 # (non-empty once release() is registered to run when Python exits)
 _released_at_exit: list = []
@@ -158,10 +160,16 @@ def expected_seconds(pixels: int, quality: str) -> float:
 
 def prior_seconds(pixels: int, quality: str) -> float:
     """What a process's first call on ``pixels`` pixels at ``quality`` is
-    expected to take before any call has measured one: :data:`PRIOR_FIXED`
+    expected to take before any call has measured one: the longest of the
+    last earlier processes' first calls where they are remembered
+    (:mod:`mitsuba_mrt.runtime.memory`), else :data:`PRIOR_FIXED`
     and :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
     (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
     import drjit as dr
+
+    remembered = _remembered_first_call(quality, int(pixels))
+    if remembered is not None:
+        return remembered
 
     seconds = PRIOR_FIXED[quality] + PRIOR_SECONDS[quality] * pixels / max(
         int(dr.thread_count()), 1)
@@ -219,7 +227,7 @@ def denoise_image(color: np.ndarray, albedo: np.ndarray | None = None,
     """
     start = time.perf_counter()
     output, setup, first = _run_filter(color, albedo, normal, quality, clean_aux)
-    _record(quality, output.shape[:2], time.perf_counter() - start - setup, first)
+    _record(quality, output.shape[:2], time.perf_counter() - start, setup, first)
     return output
 
 
@@ -264,15 +272,53 @@ def _run_filter(color, albedo, normal, quality: str,
 RECENT_CALLS = 3
 
 
-def _record(quality: str, shape: tuple, seconds: float, first: bool = False) -> None:
+def _record(quality: str, shape: tuple, total: float, setup: float = 0.0,
+            first: bool = False) -> None:
     """Note what a call on an image of ``shape`` at ``quality`` took
-    (:func:`denoise_seconds`: the median of the last :data:`RECENT_CALLS`);
-    a filter's ``first`` call as what a later one is expected to take, less
-    :data:`FIRST_CALL_SHARE` (it made the filter's buffers)."""
+    (``total`` seconds, of which its filter's ``setup``):
+    :func:`denoise_seconds`, the median of the last :data:`RECENT_CALLS`,
+    without the set-up; a filter's ``first`` call as what a later one is
+    expected to take, less :data:`FIRST_CALL_SHARE` (it made the filter's
+    buffers).  A process's first call at ``quality`` is remembered whole
+    for later processes' (:func:`prior_seconds`)."""
+    recent = _state.setdefault("recent", {})
+    if quality not in recent:
+        _remember_first_call(quality, shape[0] * shape[1], total)
+    seconds = total - setup
     if first:
         seconds /= 1.0 + FIRST_CALL_SHARE
-    note(_state.setdefault("recent", {}).setdefault(quality, {}).setdefault(
-        shape[0] * shape[1], []), seconds, RECENT_CALLS)
+    note(recent.setdefault(quality, {}).setdefault(shape[0] * shape[1], []), seconds,
+         RECENT_CALLS)
+
+
+def _first_call_key(quality: str, pixels: int) -> str:
+    return f"oidn/{quality}/{int(pixels)}"
+
+
+def _remember_first_call(quality: str, pixels: int, seconds: float) -> None:
+    """Keep ``seconds``, a process's first call at ``quality`` on ``pixels``
+    pixels, with the last earlier ones (:data:`RECENT_CALLS`) in the memory of
+    earlier processes (:mod:`mitsuba_mrt.runtime.memory`)."""
+    if not memory.enabled():
+        return
+    key = _first_call_key(quality, pixels)
+    calls = [float(v) for v in (memory.recall(key) or {}).get("seconds", [])
+             if isinstance(v, (int, float)) and v > 0]
+    note(calls, seconds, RECENT_CALLS)
+    memory.remember(key, {"seconds": calls})
+
+
+def _remembered_first_call(quality: str, pixels: int) -> float | None:
+    """The longest of earlier processes' first calls at ``quality`` on
+    ``pixels`` pixels (:func:`_remember_first_call`), read once per process;
+    None where none is remembered."""
+    known = _state.setdefault("first calls", {})
+    if (quality, pixels) not in known:
+        value = memory.recall(_first_call_key(quality, pixels)) if memory.enabled() else None
+        calls = [float(v) for v in (value or {}).get("seconds", [])
+                 if isinstance(v, (int, float)) and v > 0]
+        known[quality, pixels] = max(calls) if calls else None
+    return known[quality, pixels]
 
 
 #: At most this many samples per pixel, a render that denoises textures as
@@ -310,7 +356,7 @@ def denoise_shading(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray | 
     flat = np.where(textured, surface, albedo).astype(np.float64)
     shading = np.where(textured, np.asarray(color, dtype=np.float64) / texture, color)
     out, setup, first = _run_filter(shading, flat, normal, quality, False)
-    _record(quality, out.shape[:2], time.perf_counter() - start - setup, first)  # (the division in)
+    _record(quality, out.shape[:2], time.perf_counter() - start, setup, first)  # (the division in)
     if clean_texture:  # (its time is texture_seconds')
         texture = safe_albedo(_run_filter(albedo, None, None, TEXTURE_QUALITY, False)[0])
     return np.where(textured, out * texture, out)

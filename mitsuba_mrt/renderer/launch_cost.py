@@ -256,12 +256,14 @@ class LaunchCost:
 
     @property
     def record_s(self) -> float:
-        """What recording adds to a launch of a new spp: what the last
-        recorded launch spent recording (where measured, else what it took
-        beyond the line; with its compilation where ``spp_compiles``), other
-        than a first launch where another recorded (its recording also paid
-        for first uses, once); 0 where no launch recorded, or every launch
-        did and none measured it."""
+        """What recording adds to a launch of a new spp: what this process's
+        last recorded launch spent recording (where measured, else what it
+        took beyond the line; with its compilation where ``spp_compiles``),
+        other than a first launch where another recorded (its recording also
+        paid for first uses, once); before this process recorded, what an
+        earlier one's first launch took beyond the line
+        (:meth:`_first_record_s`); 0 where no launch recorded, or every
+        launch did and none measured it."""
         recorded = [launch for launch in self.launches if launch.recorded
                     and not launch.elsewhere]
         if not recorded:

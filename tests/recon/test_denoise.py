@@ -103,6 +103,27 @@ def test_one_slow_call_does_not_set_what_a_size_is_expected_to_take():
     denoise.release()
 
 
+def test_a_new_process_expects_its_first_call_to_take_what_earlier_first_calls_took(
+        tmp_path, monkeypatch):
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    denoise.release()
+    formula = denoise.prior_seconds(256 * 256, "fast")
+    # a process's first call at a preset is remembered whole, set-up included
+    denoise._record("fast", (256, 256), 0.04, setup=0.01, first=True)
+    denoise._record("fast", (256, 256), 0.9)  # (not the process's first: not remembered)
+    denoise.release()  # the next process
+    assert denoise.prior_seconds(256 * 256, "fast") == pytest.approx(0.04)
+    assert denoise.expected_seconds(256 * 256, "fast") == pytest.approx(0.04)
+    assert denoise.prior_seconds(128 * 128, "fast") != 0.04  # (another size: the formula's)
+    denoise._record("fast", (256, 256), 0.06, first=True)
+    denoise.release()
+    assert denoise.prior_seconds(256 * 256, "fast") == pytest.approx(0.06)  # (the longest)
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")
+    denoise.release()
+    assert denoise.prior_seconds(256 * 256, "fast") == pytest.approx(formula)
+    denoise.release()
+
+
 def test_a_filters_first_call_counts_as_what_a_later_one_takes(oidn):
     denoise.release()
     image = np.full((8, 8, 3), 0.5)
