@@ -14,6 +14,7 @@ per scene key, to plan the next one.
 from __future__ import annotations
 
 import hashlib
+import math
 import time
 from dataclasses import replace
 from typing import NamedTuple
@@ -216,6 +217,24 @@ def remember_launches(key: tuple, tracer) -> None:
         memory.remember(_memory_key(key, tracer), cost.memory())
 
 
+def _remember_probe(key: tuple, tracer, probed: "_Probe") -> None:
+    """Keep the grid probe's kernel run time for later processes that render
+    the scene (:mod:`mitsuba_mrt.runtime.memory`), where it compiled nothing
+    (a recording call runs the kernels it records)."""
+    if memory.enabled() and probed.compile == 0.0 and probed.execute > 0.0:
+        memory.remember(f"{_memory_key(key, tracer)}/probe", {"execute": probed.execute})
+
+
+def _recalled_probe(key: tuple, tracer) -> float | None:
+    """The grid probe's kernel run time an earlier process remembered for
+    ``key``'s scene (:func:`_remember_probe`), else None."""
+    if not memory.enabled():
+        return None
+    execute = (memory.recall(f"{_memory_key(key, tracer)}/probe") or {}).get("execute")
+    return (float(execute) if isinstance(execute, (int, float)) and 0.0 < execute < math.inf
+            else None)
+
+
 def plan_memory_key(kept_key: tuple, tracer) -> str | None:
     """The key of a kept plan's key (:func:`~.auto.scene_key` and
     :func:`~.auto.plan_key`) in the memory of earlier processes: its scene's
@@ -290,8 +309,9 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
     is not planned so in such a process: its compilation cannot be told.
     The plan's image is not checked (:func:`~.auto_plans.keeps`): the check's fallback,
     the passes, would start after the limit.  Where the last replayed probe
-    of ``key`` (:data:`_probe_execute`) says the plan cannot end within the
-    limit, no probe is traced.
+    of ``key`` (:data:`_probe_execute`), or before any, the last probe an
+    earlier process remembered (:func:`_recalled_probe`), says the plan
+    cannot end within the limit, no probe is traced.
     """
     width, height = pattern.width, pattern.height
     chosen = unmeasured_plan(scene, width * height)
@@ -308,9 +328,12 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
         return time.perf_counter() + ID_PASS_OVER_PROBE * execute + rest(execute, host) > end
 
     known = _probe_execute.get(key)
+    if known is None:  # (an earlier process's probe of the scene)
+        known = _recalled_probe(key, tracer)
     if known is not None and ends_late(known):
         return None, Traced(), None
     probed = _grid_probe(pattern, tracer)
+    _remember_probe(key, tracer, probed)
     if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
         return None, Traced(), probed
     if not probed.recorded:

@@ -669,6 +669,20 @@ def test_a_new_process_plans_a_time_limit_from_what_an_earlier_one_remembered(
         mitsuba_mrt.render(scene, time_limit=10.0)
 
 
+def test_a_grid_probe_is_remembered_where_it_compiled_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    monkeypatch.setattr(auto_limit, "_memory_key", lambda key, tracer: "scene")
+    probe = auto_limit._Probe(None, 0.1, 0.02, 0.01, recorded=True, compile=0.0)
+    assert auto_limit._recalled_probe(("token", 4), None) is None
+    auto_limit._remember_probe(("token", 4), None, probe)
+    assert auto_limit._recalled_probe(("token", 4), None) == 0.02
+    # (a probe that compiled ran its kernels late: its run time is not kept)
+    auto_limit._remember_probe(("token", 4), None, probe._replace(execute=0.5, compile=0.3))
+    assert auto_limit._recalled_probe(("token", 4), None) == 0.02
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")
+    assert auto_limit._recalled_probe(("token", 4), None) is None
+
+
 def test_a_remembered_cost_is_taken_only_whole_and_of_the_same_kind_of_sampler():
     good = {"spp_compiles": False, "launches": [[2, 0.06, True, 0.03, True, 0.02],
                                                 [8, 0.12, False, 0.1, False, None]]}
