@@ -160,20 +160,20 @@ def expected_seconds(pixels: int, quality: str) -> float:
 
 def prior_seconds(pixels: int, quality: str) -> float:
     """What a process's first call on ``pixels`` pixels at ``quality`` is
-    expected to take before any call has measured one: the longest of the
-    last earlier processes' first calls where they are remembered
-    (:mod:`mitsuba_mrt.runtime.memory`), else :data:`PRIOR_FIXED`
+    expected to take before any call has measured one: :data:`PRIOR_FIXED`
     and :data:`PRIOR_SECONDS`' for ``pixels`` on Dr.Jit's worker threads
-    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer."""
+    (OIDN's threads here), :data:`FIRST_CALL_SHARE` longer; or where less,
+    the longest of the last earlier processes' first calls, where they are
+    remembered (:mod:`mitsuba_mrt.runtime.memory`): a first call that was
+    slower (a small image's set-up, the machine's noise) does not make a
+    plan more cautious than the prior's."""
     import drjit as dr
-
-    remembered = _remembered_first_call(quality, int(pixels))
-    if remembered is not None:
-        return remembered
 
     seconds = PRIOR_FIXED[quality] + PRIOR_SECONDS[quality] * pixels / max(
         int(dr.thread_count()), 1)
-    return seconds * (1.0 + FIRST_CALL_SHARE)
+    prior = seconds * (1.0 + FIRST_CALL_SHARE)
+    remembered = _remembered_first_call(quality, int(pixels))
+    return prior if remembered is None else min(remembered, prior)
 
 
 def _device(oidn):
