@@ -8,7 +8,9 @@ one pass and OIDN on every pixel would overrun the limit
 (:func:`preview_first`, :func:`filled_preview`).  What the process's
 earlier renders took (their first round, their last OIDN call, the passes'
 launches, the grid probe, a preview's stages after its grid) is kept here,
-per scene key, to plan the next one.
+per scene key, to plan the next one; the passes' launches and the grid
+probe's run time also for later processes (:mod:`mitsuba_mrt.runtime.memory`),
+which plan from them where they have measured nothing themselves.
 """
 
 from __future__ import annotations
