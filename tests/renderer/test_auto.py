@@ -480,15 +480,10 @@ def test_by_default_the_passes_meet_the_full_renders_noise(scene):
     assert np.mean((result.image - truth) ** 2) < np.mean((full - truth) ** 2)
 
 
-def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant,
-                                                                         monkeypatch):
+def _rendered_unchosen(monkeypatch, *scenes) -> list:
+    """Default renders of ``scenes``, in order, during which choosing a plan
+    anew (the probes, the held-out check, the passes' estimates) fails the test."""
     from mitsuba_mrt.renderer import api, progressive
-
-    point_lit = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
-    area_lit = mi.load_string(scene_xml(384, spp=16))
-    first = {name: mitsuba_mrt.render(s) for name, s in (("mrt", point_lit),
-                                                          ("passes", area_lit))}
-    assert first["mrt"].auto.reason == auto_plans.HOME_REASON and first["passes"].auto.passes
 
     def not_again(*args, **kwargs):
         raise AssertionError("the plan was chosen anew")
@@ -496,8 +491,18 @@ def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant
         for module, name in ((auto, "noise_free"), (auto, "mrt_by_kind"),
                              (progressive, "_estimate"), (api, "check_image")):
             m.setattr(module, name, not_again)
-        mrt, passes = mitsuba_mrt.render(point_lit), mitsuba_mrt.render(area_lit)
-        mrt = mitsuba_mrt.render(point_lit)  # (Dr.Jit records a layout's first two calls)
+        return [mitsuba_mrt.render(scene) for scene in scenes]
+
+
+def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant,
+                                                                         monkeypatch):
+    point_lit = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    area_lit = mi.load_string(scene_xml(384, spp=16))
+    first = {name: mitsuba_mrt.render(s) for name, s in (("mrt", point_lit),
+                                                          ("passes", area_lit))}
+    assert first["mrt"].auto.reason == auto_plans.HOME_REASON and first["passes"].auto.passes
+    # (the MRT plan rendered twice: Dr.Jit records a layout's first two calls)
+    _, passes, mrt = _rendered_unchosen(monkeypatch, point_lit, area_lit, point_lit)
     # the MRT plan: the same image (the same seed), unchecked, its replay's time kept
     assert mrt.auto.reason == auto.AGAIN_REASON.format(auto_plans.HOME_REASON)
     assert mrt.auto.choice.label == "idpass+oidn @ 16 spp" and mrt.timings.check == 0
@@ -518,7 +523,6 @@ def test_a_default_render_takes_the_plan_its_scene_s_earlier_render_kept(variant
 
 def test_a_new_process_takes_the_default_plan_an_earlier_process_remembered(
         variant, tmp_path, monkeypatch):
-    from mitsuba_mrt.renderer import api, progressive
     from mitsuba_mrt.renderer.state import clear_caches
 
     monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
@@ -529,14 +533,7 @@ def test_a_new_process_takes_the_default_plan_an_earlier_process_remembered(
                                                           ("passes", area_lit))}
     assert first["mrt"].auto.reason == auto_plans.HOME_REASON and first["passes"].auto.passes
     clear_caches()  # the next process: nothing kept, the plans remembered
-
-    def not_again(*args, **kwargs):
-        raise AssertionError("the plan was chosen anew")
-    with monkeypatch.context() as m:
-        for module, name in ((auto, "noise_free"), (auto, "mrt_by_kind"),
-                             (progressive, "_estimate"), (api, "check_image")):
-            m.setattr(module, name, not_again)
-        mrt, passes = mitsuba_mrt.render(point_lit), mitsuba_mrt.render(area_lit)
+    mrt, passes = _rendered_unchosen(monkeypatch, point_lit, area_lit)
     assert mrt.auto.reason == auto.RECALLED_REASON.format(auto_plans.HOME_REASON)
     assert np.array_equal(mrt.image, first["mrt"].image)  # (the same plan, the same seed)
     assert passes.auto.reason == auto.RECALLED_REASON.format(first["passes"].auto.reason)
