@@ -58,8 +58,11 @@ def description_key(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrato
     ``sensor`` with ``integrator`` is made of (Mitsuba's description of
     each, the variant and Mitsuba's and Dr.Jit's versions): the same in
     every process that loads the same scene with the same parameters, a key
-    for what earlier processes measured (:mod:`mitsuba_mrt.runtime.memory`)."""
-    text = "\n".join([mi.variant(), mi.__version__, dr.__version__, str(scene), str(sensor),
+    for what earlier processes measured (:mod:`mitsuba_mrt.runtime.memory`).
+    The scene's description is taken as its sorted lines: Mitsuba loads a
+    scene's shapes in parallel, and lists them in the order they loaded."""
+    scene_lines = sorted(str(scene).splitlines())
+    text = "\n".join([mi.variant(), mi.__version__, dr.__version__, *scene_lines, str(sensor),
                       str(integrator), str(int(pixels))])
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 

@@ -142,3 +142,19 @@ def test_a_seed_a_sampler_cannot_take_is_refused(variant):
         for bad in (-1, 1 << 32, 2.5, True):
             with pytest.raises(MRTError, match=r"^seed must be an integer in \[0, 2\^32\)"):
                 call(scene, seed=bad)
+
+
+def test_a_scene_s_description_key_is_its_content_s_not_its_shapes_order(variant):
+    from mitsuba_mrt.renderer.scene_query import description_key
+
+    def key(radii: tuple, pixels: int = 64) -> str:
+        shapes = {f"ball{k}": {"type": "sphere", "radius": r, "center": [2.0 * k, 0, 0]}
+                  for k, r in radii}
+        scene = mi.load_dict({"type": "scene", "integrator": {"type": "path"},
+                              "sensor": {"type": "perspective"}, **shapes})
+        return description_key(scene, scene.sensors()[0], scene.integrator(), pixels)
+
+    # (Mitsuba lists shapes in the order they loaded, which may differ between processes)
+    assert key(((0, 1.0), (1, 0.5))) == key(((1, 0.5), (0, 1.0)))
+    assert key(((0, 1.0), (1, 0.5))) != key(((0, 1.0), (1, 0.6)))
+    assert key(((0, 1.0),), 64) != key(((0, 1.0),), 65)
