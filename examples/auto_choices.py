@@ -20,6 +20,7 @@ choices alone.  Printed: each one's median time and error as ratios to
 """
 
 import argparse
+import os
 import statistics
 from pathlib import Path
 
@@ -27,6 +28,8 @@ from gallery_scenes import add_truths, load
 
 
 def main():
+    # (a benchmark plans from what its own process measures, not what earlier renders remembered)
+    os.environ.setdefault("MITSUBA_MRT_MEMORY", "off")
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="+")
     parser.add_argument("--res", type=int, default=256)

@@ -10,6 +10,7 @@ ratio last.
 """
 
 import argparse
+import os
 import statistics
 from pathlib import Path
 
@@ -17,6 +18,8 @@ import mitsuba_mrt
 
 
 def main():
+    # (a benchmark plans from what its own process measures, not what earlier renders remembered)
+    os.environ.setdefault("MITSUBA_MRT_MEMORY", "off")
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default="scenes_xml")
     parser.add_argument("--res", type=int, nargs="+", default=[200, 400])
