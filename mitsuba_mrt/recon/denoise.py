@@ -295,17 +295,21 @@ def _first_call_key(quality: str, pixels: int) -> str:
     return f"oidn/{quality}/{int(pixels)}"
 
 
+def _remembered_calls(quality: str, pixels: int) -> list:
+    """Earlier processes' first calls at ``quality`` on ``pixels`` pixels, as
+    the memory (:mod:`mitsuba_mrt.runtime.memory`) keeps them; [] where none
+    are, or the memory is off."""
+    value = memory.recall(_first_call_key(quality, pixels)) or {}
+    return [float(v) for v in value.get("seconds", []) if isinstance(v, (int, float)) and v > 0]
+
+
 def _remember_first_call(quality: str, pixels: int, seconds: float) -> None:
     """Keep ``seconds``, a process's first call at ``quality`` on ``pixels``
     pixels, with the last earlier ones (:data:`RECENT_CALLS`) in the memory of
-    earlier processes (:mod:`mitsuba_mrt.runtime.memory`)."""
-    if not memory.enabled():
-        return
-    key = _first_call_key(quality, pixels)
-    calls = [float(v) for v in (memory.recall(key) or {}).get("seconds", [])
-             if isinstance(v, (int, float)) and v > 0]
+    earlier processes."""
+    calls = _remembered_calls(quality, pixels)
     note(calls, seconds, RECENT_CALLS)
-    memory.remember(key, {"seconds": calls})
+    memory.remember(_first_call_key(quality, pixels), {"seconds": calls})
 
 
 def _remembered_first_call(quality: str, pixels: int) -> float | None:
@@ -314,10 +318,7 @@ def _remembered_first_call(quality: str, pixels: int) -> float | None:
     None where none is remembered."""
     known = _state.setdefault("first calls", {})
     if (quality, pixels) not in known:
-        value = memory.recall(_first_call_key(quality, pixels)) if memory.enabled() else None
-        calls = [float(v) for v in (value or {}).get("seconds", [])
-                 if isinstance(v, (int, float)) and v > 0]
-        known[quality, pixels] = max(calls) if calls else None
+        known[quality, pixels] = max(_remembered_calls(quality, pixels), default=None)
     return known[quality, pixels]
 
 

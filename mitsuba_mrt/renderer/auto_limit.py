@@ -136,7 +136,8 @@ _memory_keys: dict = {}
 #: a replayed probe's time does not show.
 _probe_recording_s: dict = {}
 #: The grid probe's kernel run time per the same keys (the last
-#: :data:`KEPT_COSTS`), from its last replay: where it says :data:`HOME`
+#: :data:`KEPT_COSTS`), from its last replay, or before any, what an earlier
+#: process remembered (:func:`_recalled_probe`): where it says :data:`HOME`
 #: cannot end within a time limit, the next render of the scene is not
 #: probed for it (:func:`mrt_within`).
 _probe_execute: dict = {}
@@ -330,8 +331,10 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
         return time.perf_counter() + ID_PASS_OVER_PROBE * execute + rest(execute, host) > end
 
     known = _probe_execute.get(key)
-    if known is None:  # (an earlier process's probe of the scene)
+    if known is None:  # (an earlier process's probe of the scene, read once)
         known = _recalled_probe(key, tracer)
+        if known is not None:
+            _keep(_probe_execute, key, known)
     if known is not None and ends_late(known):
         return None, Traced(), None
     probed = _grid_probe(pattern, tracer)

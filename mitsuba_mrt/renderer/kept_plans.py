@@ -180,7 +180,7 @@ def note_passes(key: tuple, choice: Candidate, reason: str,
 def _remember(kept: KeptPlan, memory_key: str | None) -> None:
     """Keep ``kept``'s plan and reason for later processes under ``memory_key``
     (None: not remembered)."""
-    if memory_key is not None and memory.enabled():
+    if memory_key is not None:
         memory.remember(memory_key, {"choice": asdict(kept.choice), "reason": kept.reason})
 
 
@@ -194,7 +194,7 @@ def _recalled(memory_key: str | None) -> KeptPlan | None:
     >>> _recalled(None) is None
     True
     """
-    value = memory.recall(memory_key) if memory_key is not None and memory.enabled() else None
+    value = None if memory_key is None else memory.recall(memory_key)
     try:
         choice = Candidate(**value["choice"])
         reason = value["reason"]

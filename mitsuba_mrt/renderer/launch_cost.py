@@ -371,7 +371,7 @@ class LaunchCost:
         if per_spp <= 0:
             return 0
         launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
-                    if self(spp) <= seconds]  # (none of them new: no recording added)
+                    if self(spp) <= seconds]  # (an earlier process's with its recording)
         if self.spp_compiles and self.launches:
             return max(launched + [0])
         def most(spent: float) -> int:  # (a fit's rounding is not a launch short)
