@@ -9,8 +9,9 @@ one pass and OIDN on every pixel would overrun the limit
 earlier renders took (their first round, their last OIDN call, the passes'
 launches, the grid probe, a preview's stages after its grid) is kept here,
 per scene key, to plan the next one; the passes' launches and the grid
-probe's run time also for later processes (:mod:`mitsuba_mrt.runtime.memory`),
-which plan from them where they have measured nothing themselves.
+probe also for later processes (:mod:`mitsuba_mrt.runtime.memory`),
+which plan from them where they have measured nothing themselves (a
+remembered probe is not traced again: it takes a tenth of the smallest limits).
 """
 
 from __future__ import annotations
@@ -220,22 +221,54 @@ def remember_launches(key: tuple, tracer) -> None:
         memory.remember(_memory_key(key, tracer), cost.memory())
 
 
-def _remember_probe(key: tuple, tracer, probed: "_Probe") -> None:
-    """Keep the grid probe's kernel run time for later processes that render
-    the scene (:mod:`mitsuba_mrt.runtime.memory`), where it compiled nothing
-    (a recording call runs the kernels it records)."""
+def _remember_probe(key: tuple, tracer, probed: "_Probe", count: int) -> None:
+    """Keep the grid probe of ``count`` pixels for later processes that
+    render the scene (:mod:`mitsuba_mrt.runtime.memory`), where it compiled
+    nothing (a recording call runs the kernels it records): its kernel run
+    time, and where it recorded them (a process's first trace of the scene,
+    as a later process's will be) what it took beyond them."""
     if memory.enabled() and probed.compile == 0.0 and probed.execute > 0.0:
-        memory.remember(f"{_memory_key(key, tracer)}/probe", {"execute": probed.execute})
+        kept = {"execute": probed.execute, "count": int(count)}
+        if probed.recorded:
+            kept["host"] = probed.host
+        memory.remember(f"{_memory_key(key, tracer)}/probe", kept)
 
 
 def _recalled_probe(key: tuple, tracer) -> float | None:
     """The grid probe's kernel run time an earlier process remembered for
     ``key``'s scene (:func:`_remember_probe`), else None."""
+    kept = _recalled(key, tracer)
+    return None if kept is None else kept[0]
+
+
+def _recalled_line(key: tuple, tracer, pattern: SamplePattern) -> "_Probe | None":
+    """The grid probe an earlier process made of ``key``'s scene as its first
+    trace of it (:func:`_remember_probe`), as :func:`_grid_probe` would
+    return it in this process, without its grid; else None."""
+    kept = _recalled(key, tracer)
+    if kept is None or kept[1] is None:
+        return None
+    execute, host, count = kept
+    pixels = pattern.width * pattern.height
+    return _Probe(None, host + PASS_OVER_GRID * execute * pixels / count, execute, host, True)
+
+
+def _recalled(key: tuple, tracer) -> tuple[float, float | None, int] | None:
+    """(kernel run time, time beyond it where the probe recorded, else None,
+    its pixels) of the grid probe an earlier process remembered for ``key``'s
+    scene; None where none is remembered or its record is not whole."""
     if not memory.enabled():
         return None
-    execute = (memory.recall(f"{_memory_key(key, tracer)}/probe") or {}).get("execute")
-    return (float(execute) if isinstance(execute, (int, float)) and 0.0 < execute < math.inf
-            else None)
+    kept = memory.recall(f"{_memory_key(key, tracer)}/probe") or {}
+
+    def number(name: str, least: float = 0.0) -> float | None:
+        value = kept.get(name)
+        ok = isinstance(value, (int, float)) and least <= value < math.inf
+        return float(value) if ok else None
+    execute, host, count = number("execute"), number("host"), number("count", 1.0)
+    if execute is None or execute <= 0.0:
+        return None
+    return execute, (host if count is not None else None), int(count or 1)
 
 
 def plan_memory_key(kept_key: tuple, tracer) -> str | None:
@@ -338,7 +371,7 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
     if known is not None and ends_late(known):
         return None, Traced(), None
     probed = _grid_probe(pattern, tracer)
-    _remember_probe(key, tracer, probed)
+    _remember_probe(key, tracer, probed, pattern.count)
     if probed.recorded and sampler_bakes_spp(tracer.sensor.sampler()):
         return None, Traced(), probed
     if not probed.recorded:
@@ -407,7 +440,12 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
         # kernels of its own, about as long, for a question the time answers
         return None, None, textured and not _passes_fit_unprobed(
             left, width * height, params.denoise_quality, SHADING_EXTRA)
-    probed = probed or _grid_probe(pattern, tracer)  # the preview's own grid: a pass's cost
+    if probed is None and not launches.launches:
+        # an earlier process's first probe of the scene tells what this one's would
+        probed = _recalled_line(key, tracer, pattern)
+    if probed is None:  # the preview's own grid: a pass's cost
+        probed = _grid_probe(pattern, tracer)
+        _remember_probe(key, tracer, probed, pattern.count)
     end = started + PROBED_SLACK * limit
     grid, pass_s = probed.grid, probed.pass_s
     if launches.spp_compiles and launches.launches:
@@ -525,9 +563,10 @@ class _Probe(NamedTuple):
     seconds a pass over every pixel is expected to take, the trace's kernels'
     run time, what it took beyond them, whether it recorded its kernels (a
     process's first trace of the scene) and what compiling those not in
-    Dr.Jit's caches took of ``host`` (once per machine, not per process)."""
+    Dr.Jit's caches took of ``host`` (once per machine, not per process).
+    ``grid`` is None for a probe an earlier process made (:func:`_recalled_line`)."""
 
-    grid: SparseTrace
+    grid: SparseTrace | None
     pass_s: float
     execute: float
     host: float

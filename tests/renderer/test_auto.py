@@ -671,13 +671,47 @@ def test_a_grid_probe_is_remembered_where_it_compiled_nothing(tmp_path, monkeypa
     monkeypatch.setattr(auto_limit, "_memory_key", lambda key, tracer: "scene")
     probe = auto_limit._Probe(None, 0.1, 0.02, 0.01, recorded=True, compile=0.0)
     assert auto_limit._recalled_probe(("token", 4), None) is None
-    auto_limit._remember_probe(("token", 4), None, probe)
+    auto_limit._remember_probe(("token", 4), None, probe, 10)
     assert auto_limit._recalled_probe(("token", 4), None) == 0.02
     # (a probe that compiled ran its kernels late: its run time is not kept)
-    auto_limit._remember_probe(("token", 4), None, probe._replace(execute=0.5, compile=0.3))
+    auto_limit._remember_probe(("token", 4), None, probe._replace(execute=0.5, compile=0.3), 10)
     assert auto_limit._recalled_probe(("token", 4), None) == 0.02
+    # as this process's first probe would be: its time beyond the kernels, a
+    # pass's guess scaled from its 10 pixels to the image's 100
+    pattern = grid_pattern(10, 10, 0.1)
+    line = auto_limit._recalled_line(("token", 4), None, pattern)
+    assert line.grid is None and line.recorded and line.host == 0.01
+    assert line.pass_s == pytest.approx(0.01 + auto_limit.PASS_OVER_GRID * 0.02 * 10)
+    # a replayed probe's time beyond its kernels lacks the recording a first trace pays
+    auto_limit._remember_probe(("token", 4), None, probe._replace(recorded=False), 10)
+    assert auto_limit._recalled_probe(("token", 4), None) == 0.02
+    assert auto_limit._recalled_line(("token", 4), None, pattern) is None
     monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")
     assert auto_limit._recalled_probe(("token", 4), None) is None
+
+
+def test_a_new_process_takes_the_probe_an_earlier_one_remembered_and_traces_none(
+        scene, tmp_path, monkeypatch):
+    from mitsuba_mrt.renderer.state import clear_caches
+
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)  # (the limit asks the probe)
+    monkeypatch.setattr(auto_limit, "unmeasured_plan", lambda *args: None)  # (no MRT plan)
+    monkeypatch.setattr(auto_limit, "_preview_due", lambda *args, **kw: True)  # (previews)
+    clear_caches()
+    first = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert first.auto.choice.name.startswith("fast")  # (a preview: no launch of the passes)
+    clear_caches()  # the next process: the probe's line recalled, its grid traced once
+
+    def probe(*args):
+        raise AssertionError("the grid was probed")
+    monkeypatch.setattr(auto_limit, "_grid_probe", probe)
+    again = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert again.auto.choice.name == first.auto.choice.name
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")  # nothing recalled: the probe is asked
+    clear_caches()
+    with pytest.raises(AssertionError, match="probed"):
+        mitsuba_mrt.render(scene, time_limit=10.0)
 
 
 def test_a_remembered_cost_is_taken_only_whole_and_of_the_same_kind_of_sampler():
