@@ -225,11 +225,11 @@ def _remember_probe(key: tuple, tracer, probed: "_Probe", count: int) -> None:
     """Keep the grid probe of ``count`` pixels for later processes that
     render the scene (:mod:`mitsuba_mrt.runtime.memory`), where it compiled
     nothing (a recording call runs the kernels it records): its kernel run
-    time, and where it recorded them (a process's first trace of the scene,
-    as a later process's will be) what it took beyond them."""
+    time, and where it was the process's first recording (as a later
+    process's first probe will be) what it took beyond them."""
     if memory.enabled() and probed.compile == 0.0 and probed.execute > 0.0:
         kept = {"execute": probed.execute, "count": int(count)}
-        if probed.recorded:
+        if probed.first:
             kept["host"] = probed.host
         memory.remember(f"{_memory_key(key, tracer)}/probe", kept)
 
@@ -250,7 +250,8 @@ def _recalled_line(key: tuple, tracer, pattern: SamplePattern) -> "_Probe | None
         return None
     execute, host, count = kept
     pixels = pattern.width * pattern.height
-    return _Probe(None, host + PASS_OVER_GRID * execute * pixels / count, execute, host, True)
+    return _Probe(None, host + PASS_OVER_GRID * execute * pixels / count, execute, host, True,
+                  first=True)
 
 
 def _recalled(key: tuple, tracer) -> tuple[float, float | None, int] | None:
@@ -562,8 +563,10 @@ class _Probe(NamedTuple):
     """The grid probe (:func:`_grid_probe`): the preview's grid trace, the
     seconds a pass over every pixel is expected to take, the trace's kernels'
     run time, what it took beyond them, whether it recorded its kernels (a
-    process's first trace of the scene) and what compiling those not in
-    Dr.Jit's caches took of ``host`` (once per machine, not per process).
+    process's first trace of the scene), what compiling those not in
+    Dr.Jit's caches took of ``host`` (once per machine, not per process) and
+    whether it was the process's first recording of all (its ``host`` holds
+    the first uses a fresh process pays).
     ``grid`` is None for a probe an earlier process made (:func:`_recalled_line`)."""
 
     grid: SparseTrace | None
@@ -572,6 +575,7 @@ class _Probe(NamedTuple):
     host: float
     recorded: bool
     compile: float = 0.0
+    first: bool = False
 
 
 def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
@@ -587,7 +591,8 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
     host = max(time.perf_counter() - begin - spent.execute, 0.0)
     pixels = pattern.width * pattern.height
     return _Probe(grid, host + PASS_OVER_GRID * spent.execute * pixels / pattern.count,
-                  spent.execute, host, recordings() > recorded, min(spent.compile, host))
+                  spent.execute, host, recordings() > recorded, min(spent.compile, host),
+                  recorded == 0 < recordings())
 
 
 def _passes_fit_unprobed(left: float, pixels: int, quality: str, extra: float = 0.0) -> bool:

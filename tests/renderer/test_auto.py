@@ -669,7 +669,7 @@ def test_a_new_process_plans_a_time_limit_from_what_an_earlier_one_remembered(
 def test_a_grid_probe_is_remembered_where_it_compiled_nothing(tmp_path, monkeypatch):
     monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
     monkeypatch.setattr(auto_limit, "_memory_key", lambda key, tracer: "scene")
-    probe = auto_limit._Probe(None, 0.1, 0.02, 0.01, recorded=True, compile=0.0)
+    probe = auto_limit._Probe(None, 0.1, 0.02, 0.01, recorded=True, compile=0.0, first=True)
     assert auto_limit._recalled_probe(("token", 4), None) is None
     auto_limit._remember_probe(("token", 4), None, probe, 10)
     assert auto_limit._recalled_probe(("token", 4), None) == 0.02
@@ -682,8 +682,8 @@ def test_a_grid_probe_is_remembered_where_it_compiled_nothing(tmp_path, monkeypa
     line = auto_limit._recalled_line(("token", 4), None, pattern)
     assert line.grid is None and line.recorded and line.host == 0.01
     assert line.pass_s == pytest.approx(0.01 + auto_limit.PASS_OVER_GRID * 0.02 * 10)
-    # a replayed probe's time beyond its kernels lacks the recording a first trace pays
-    auto_limit._remember_probe(("token", 4), None, probe._replace(recorded=False), 10)
+    # a probe after other recordings lacks the first uses a fresh process pays
+    auto_limit._remember_probe(("token", 4), None, probe._replace(first=False), 10)
     assert auto_limit._recalled_probe(("token", 4), None) == 0.02
     assert auto_limit._recalled_line(("token", 4), None, pattern) is None
     monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")
