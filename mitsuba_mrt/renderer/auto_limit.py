@@ -11,7 +11,7 @@ launches, the grid probe, a preview's stages after its grid) is kept here,
 per scene key, to plan the next one; the passes' launches and the grid
 probe also for later processes (:mod:`mitsuba_mrt.runtime.memory`),
 which plan from them where they have measured nothing themselves (a
-remembered probe is not traced again: it takes a tenth of the smallest limits).
+remembered probe is not traced again: it takes a fifth of the smallest limits).
 """
 
 from __future__ import annotations
@@ -255,9 +255,9 @@ def _recalled_line(key: tuple, tracer, pattern: SamplePattern) -> "_Probe | None
 
 
 def _recalled(key: tuple, tracer) -> tuple[float, float | None, int] | None:
-    """(kernel run time, time beyond it where the probe recorded, else None,
-    its pixels) of the grid probe an earlier process remembered for ``key``'s
-    scene; None where none is remembered or its record is not whole."""
+    """(kernel run time, time beyond it where the probe was its process's
+    first recording, else None, its pixels) of the grid probe an earlier
+    process remembered for ``key``'s scene; None where none is remembered."""
     if not memory.enabled():
         return None
     kept = memory.recall(f"{_memory_key(key, tracer)}/probe") or {}
@@ -269,7 +269,9 @@ def _recalled(key: tuple, tracer) -> tuple[float, float | None, int] | None:
     execute, host, count = number("execute"), number("host"), number("count", 1.0)
     if execute is None or execute <= 0.0:
         return None
-    return execute, (host if count is not None else None), int(count or 1)
+    if count is None:  # (a line needs the pixels its kernel time was for)
+        return execute, None, 1
+    return execute, host, int(count)
 
 
 def plan_memory_key(kept_key: tuple, tracer) -> str | None:
