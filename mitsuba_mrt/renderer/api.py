@@ -197,7 +197,8 @@ def _note_overrun(result: MRTResult) -> None:
     took, limit = result.timings.total, plan.time_limit
     if took > OVERRUN * limit:
         least = (": the preview is the least this image costs here"
-                 if plan.choice in (auto_limit.PREVIEW, auto_limit.UNDENOISED) else "")
+                 if replace(plan.choice, spp=1) in (auto_limit.PREVIEW, auto_limit.UNDENOISED,
+                                                    auto_limit.UPSAMPLED) else "")
         plan.notes.append(f"took {took:.3f} s, {took / limit:.1f}x the time limit of "
                           f"{limit:.3g} s{least}")
 
@@ -257,7 +258,8 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, recorded: Recorde
                   choice.mode, plan, start, progress or _quiet, outcome.grid)
     if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
         return _checked(result, scene, pattern, tracer, params, start, recorded, progress)
-    if outcome.preview_key is not None:  # (its grid was traced: the rest, for the next preview)
+    if outcome.preview_key is not None and choice.mode == "fast":
+        # (its grid was traced: the rest of a preview, for the next one)
         auto_limit.note_preview_after(outcome.preview_key, time.perf_counter() - begin,
                                       result.timings.denoise, width * height)
     if outcome.kept_key is not None:  # (a kept plan at this spp: what it took, for the next)

@@ -53,6 +53,13 @@ PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the 
 #: would end past :data:`PREVIEW_SLACK` times the limit: its grid as traced.
 UNDENOISED = Candidate("fast", "mrt", 1, mode="fast", denoise=False)
 UNDENOISED_NOTE = "OIDN would end past the time limit: the preview is not denoised"
+#: The preview where even its reconstruction, right after the grid's first
+#: launch, would end past :data:`PREVIEW_SLACK` times the limit (a limit
+#: that a fresh process's first trace nearly fills): the grid upsampled,
+#: a fraction of the reconstruction's time.
+UPSAMPLED = Candidate("bicubic", "mrt", 1, mode="bicubic", denoise=False)
+UPSAMPLED_NOTE = ("the reconstruction would end past the time limit: the preview is the grid "
+                  "upsampled (bicubic)")
 #: The note of a preview taken where a pass could be planned only at an spp
 #: traced before in the process (``{}``), as the sampler bakes its spp into
 #: its kernels: a pass of 1 spp would record kernels whose compilation, where
@@ -107,6 +114,10 @@ ID_PASS_OVER_PROBE = 32.0
 #: ... and the stages after its traces (OIDN on the grid, the reconstruction)
 #: this many seconds a pixel (0.29-0.38 us warm on the gallery at 400-512 px).
 FINISH_PER_PIXEL = 0.45e-6
+#: What a preview's reconstruction without OIDN (mode ``fast``) takes per
+#: image pixel in a fresh process (0.46 us: ``instanced`` at 256 px, 2 cores):
+#: where it would end past the limit's slack, the grid is upsampled instead.
+RECONSTRUCTION_PER_PIXEL = 0.5e-6
 #: The reason of :data:`HOME` taken under a time limit (``{}``: its kind's).
 WITHIN_REASON = "{}; within the time limit"
 
@@ -498,17 +509,30 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
     :func:`.preview.preview_grid`.  Where those stages would end past
     :data:`PREVIEW_SLACK` times the limit even right after the grid's first
     launch (a fresh process's first trace and OIDN call), the preview goes
-    without OIDN (:data:`UNDENOISED_NOTE`)."""
+    without OIDN (:data:`UNDENOISED_NOTE`), and where even its
+    reconstruction would (:func:`_reconstruction_late`), it is the grid
+    upsampled (:data:`UPSAMPLED_NOTE`)."""
     after = _preview_after(key, pattern, params.denoise_quality)
     grid = preview_grid(outcome.grid, pattern, tracer,
                         started + TIME_MARGIN * params.time_limit - after)
     plan = outcome.plan
     plan.choice = replace(plan.choice, spp=grid.spp)
     outcome = replace(outcome, grid=grid, preview_key=key)
-    if time.perf_counter() + after > started + PREVIEW_SLACK * params.time_limit:
+    end = started + PREVIEW_SLACK * params.time_limit
+    if time.perf_counter() + after > end:
         plan.choice = replace(plan.choice, name=UNDENOISED.name, denoise=False)
         plan.notes.append(UNDENOISED_NOTE)
+        if _reconstruction_late(end, pattern.width * pattern.height):
+            plan.choice = replace(plan.choice, name=UPSAMPLED.name, mode=UPSAMPLED.mode)
+            plan.notes.append(UPSAMPLED_NOTE)
     return outcome
+
+
+def _reconstruction_late(end: float, pixels: int) -> bool:
+    """Whether the preview's reconstruction without OIDN, started now, would
+    end after ``end`` (a ``time.perf_counter()`` value): it is expected to
+    take :data:`RECONSTRUCTION_PER_PIXEL` a pixel of the image."""
+    return time.perf_counter() + RECONSTRUCTION_PER_PIXEL * pixels > end
 
 
 def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:

@@ -555,8 +555,9 @@ def test_an_mrt_plan_runs_its_mode_with_its_denoising(scene, monkeypatch):
     assert result.params.denoise == "oidn" and result.timings.denoise > 0
 
 
-def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
+def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene, monkeypatch):
     release()  # OIDN's cost unknown (its prior stands in), no pass traced yet
+    monkeypatch.setattr(auto_limit, "_reconstruction_late", lambda *args: False)
     result = mitsuba_mrt.render(scene, time_limit=1e-6)
     plan = result.auto
     # OIDN would end past the limit even right after the grid: the preview goes without
@@ -570,6 +571,21 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene):
                                    "this image costs here")
     # the grid that told the plan is the preview's own: the image is the mode's
     direct = mitsuba_mrt.render(scene, mode="fast", spp=1, denoise="none")
+    assert np.array_equal(result.image, direct.image)
+
+
+def test_a_preview_whose_reconstruction_would_overrun_is_the_grid_upsampled(scene,
+                                                                            monkeypatch):
+    release()
+    monkeypatch.setattr(auto_limit, "_preview_rate", [])
+    result = mitsuba_mrt.render(scene, time_limit=1e-6)
+    plan = result.auto
+    assert plan.choice == auto_limit.UPSAMPLED and result.mode_used == "bicubic"
+    assert plan.notes[:2] == [auto_limit.UNDENOISED_NOTE, auto_limit.UPSAMPLED_NOTE]
+    assert plan.notes[-1].endswith("the preview is the least this image costs here")
+    assert auto_limit._preview_rate == []  # (not a rate for the next fast preview)
+    # the grid that told the plan is the upsampling's own: the image is the mode's
+    direct = mitsuba_mrt.render(scene, mode="bicubic", spp=1, denoise="none")
     assert np.array_equal(result.image, direct.image)
 
 
@@ -1099,7 +1115,8 @@ def test_a_time_limit_the_render_overran_is_a_note(tmp_path):
                    "--time-limit", "1e-6", "--no-reference")
     assert proc.returncode == 0
     notes = [line for line in proc.stderr.splitlines() if line.startswith("note: ")]
-    assert len(notes) == 2 and "x the time limit of 1e-06 s" in notes[1]
+    assert len(notes) == 3 and "x the time limit of 1e-06 s" in notes[2]  # (after the
+    # preview's: without OIDN, then the grid upsampled, as even the fast one would overrun)
     summary = json.loads(next(tmp_path.glob("*.json")).read_text())
     assert notes == ["note: " + note for note in summary["auto"]["notes"]]
 
