@@ -22,6 +22,8 @@ import time
 from dataclasses import replace
 from typing import NamedTuple
 
+import numpy as np
+
 from ..modes.plan import Candidate, Plan
 from ..recon.denoise import denoise_seconds, expected_seconds, preset, prior_seconds
 from ..recon.sampling import SamplePattern
@@ -114,10 +116,14 @@ ID_PASS_OVER_PROBE = 32.0
 #: ... and the stages after its traces (OIDN on the grid, the reconstruction)
 #: this many seconds a pixel (0.29-0.38 us warm on the gallery at 400-512 px).
 FINISH_PER_PIXEL = 0.45e-6
-#: What a preview's reconstruction without OIDN (mode ``fast``) takes per
-#: image pixel in a fresh process (0.46 us: ``instanced`` at 256 px, 2 cores):
-#: where it would end past the limit's slack, the grid is upsampled instead.
-RECONSTRUCTION_PER_PIXEL = 0.5e-6
+#: What a preview's reconstruction without OIDN (mode ``fast``) is expected
+#: to take per image pixel in a fresh process: this much, plus
+#: :data:`RECONSTRUCTION_PER_EDGE` times the share of the grid's samples on an
+#: id edge (on the gallery at 256 px, 2 cores: 0.27-0.44 us, the most where
+#: edges are many, ``cornell`` and ``instanced``; the fit is within 17 %
+#: above and 12 % below).  Where it would end past the limit's slack, the
+#: grid is upsampled instead.
+RECONSTRUCTION_PER_PIXEL, RECONSTRUCTION_PER_EDGE = 0.25e-6, 0.8e-6
 #: The reason of :data:`HOME` taken under a time limit (``{}``: its kind's).
 WITHIN_REASON = "{}; within the time limit"
 
@@ -522,17 +528,40 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
     if time.perf_counter() + after > end:
         plan.choice = replace(plan.choice, name=UNDENOISED.name, denoise=False)
         plan.notes.append(UNDENOISED_NOTE)
-        if _reconstruction_late(end, pattern.width * pattern.height):
+        if _reconstruction_late(end, pattern, grid.ids(params.rule_for("fast"))):
             plan.choice = replace(plan.choice, name=UPSAMPLED.name, mode=UPSAMPLED.mode)
             plan.notes.append(UPSAMPLED_NOTE)
     return outcome
 
 
-def _reconstruction_late(end: float, pixels: int) -> bool:
-    """Whether the preview's reconstruction without OIDN, started now, would
-    end after ``end`` (a ``time.perf_counter()`` value): it is expected to
-    take :data:`RECONSTRUCTION_PER_PIXEL` a pixel of the image."""
-    return time.perf_counter() + RECONSTRUCTION_PER_PIXEL * pixels > end
+def _reconstruction_late(end: float, pattern: SamplePattern, sample_ids: np.ndarray,
+                         now: float | None = None) -> bool:
+    """Whether the preview's reconstruction without OIDN, started ``now``
+    (default: now), would end after ``end`` (``time.perf_counter()``
+    values), from the grid's ids (:data:`RECONSTRUCTION_PER_PIXEL`)."""
+    per_pixel = RECONSTRUCTION_PER_PIXEL + RECONSTRUCTION_PER_EDGE * _edge_share(
+        sample_ids.reshape(pattern.grid_shape))
+    begin = time.perf_counter() if now is None else now
+    return begin + per_pixel * pattern.width * pattern.height > end
+
+
+def _edge_share(grid_ids: np.ndarray) -> float:
+    """The share of a grid's samples with a sample of another id beside them
+    (left, right, above or below).
+
+    Examples
+    --------
+    >>> _edge_share(np.array([[1, 1, 2], [1, 1, 2], [1, 1, 2]]))
+    0.6666666666666666
+    """
+    across = grid_ids[:, 1:] != grid_ids[:, :-1]
+    down = grid_ids[1:] != grid_ids[:-1]
+    edge = np.zeros(grid_ids.shape, dtype=bool)
+    edge[:, 1:] |= across
+    edge[:, :-1] |= across
+    edge[1:] |= down
+    edge[:-1] |= down
+    return float(edge.mean()) if edge.size else 0.0
 
 
 def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:

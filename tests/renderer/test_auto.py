@@ -589,6 +589,20 @@ def test_a_preview_whose_reconstruction_would_overrun_is_the_grid_upsampled(scen
     assert np.array_equal(result.image, direct.image)
 
 
+def test_a_preview_s_reconstruction_is_expected_to_take_longer_where_ids_have_more_edges():
+    pattern = grid_pattern(256, 256, 0.1)
+    one = np.zeros(pattern.count, dtype=np.int64)  # one region: no edge
+    rows, cols = np.indices(pattern.grid_shape)
+    checker = ((rows + cols) % 2).ravel()  # every sample on an edge
+    pixels = 256 * 256
+    for ids, per_pixel in ((one, auto_limit.RECONSTRUCTION_PER_PIXEL),
+                           (checker, auto_limit.RECONSTRUCTION_PER_PIXEL
+                            + auto_limit.RECONSTRUCTION_PER_EDGE)):
+        expected = per_pixel * pixels
+        assert not auto_limit._reconstruction_late(1.01 * expected, pattern, ids, now=0.0)
+        assert auto_limit._reconstruction_late(0.99 * expected, pattern, ids, now=0.0)
+
+
 def test_a_preview_is_denoised_where_the_limit_leaves_oidn_room(scene, monkeypatch):
     monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
     monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)  # (the preview is asked)
