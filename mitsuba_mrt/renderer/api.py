@@ -197,8 +197,8 @@ def _note_overrun(result: MRTResult) -> None:
     took, limit = result.timings.total, plan.time_limit
     if took > OVERRUN * limit:
         least = (": the preview is the least this image costs here"
-                 if replace(plan.choice, spp=1) in (auto_limit.PREVIEW, auto_limit.UNDENOISED,
-                                                    auto_limit.UPSAMPLED) else "")
+                 if plan.choice in (auto_limit.PREVIEW, auto_limit.UNDENOISED,
+                                    auto_limit.UPSAMPLED) else "")
         plan.notes.append(f"took {took:.3f} s, {took / limit:.1f}x the time limit of "
                           f"{limit:.3g} s{least}")
 
