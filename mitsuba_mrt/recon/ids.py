@@ -24,6 +24,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..errors import MRTError
+from .metrics import edge_mask
 
 ID_RULES = ("paper", "exact")
 
@@ -164,14 +165,8 @@ def edge_share(id_map: np.ndarray) -> float:
     0.5
     >>> edge_share(np.zeros((3, 3), dtype=int))
     0.0
+    >>> edge_share(np.array([[1, 1, 2], [1, 1, 2], [1, 1, 2]]))
+    0.6666666666666666
     """
     ids = np.asarray(id_map)
-    if ids.size == 0:
-        return 0.0
-    edge = np.zeros(ids.shape, dtype=bool)
-    across, down = ids[:, 1:] != ids[:, :-1], ids[1:, :] != ids[:-1, :]
-    edge[:, 1:] |= across
-    edge[:, :-1] |= across
-    edge[1:, :] |= down
-    edge[:-1, :] |= down
-    return float(edge.mean())
+    return float(edge_mask(ids).mean()) if ids.size else 0.0

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..modes.plan import Candidate, Plan
 from ..recon.denoise import denoise_seconds, expected_seconds, preset, prior_seconds
+from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern
 from ..runtime import memory
 from ..runtime.jit import kernel_seconds
@@ -266,9 +267,8 @@ def _recalled_line(key: tuple, tracer, pattern: SamplePattern) -> "_Probe | None
     if kept is None or kept[1] is None:
         return None
     execute, host, count = kept
-    pixels = pattern.width * pattern.height
-    return _Probe(None, host + PASS_OVER_GRID * execute * pixels / count, execute, host, True,
-                  first=True)
+    return _Probe(None, _pass_seconds(host, execute, pattern.width * pattern.height, count),
+                  execute, host, True, first=True)
 
 
 def _recalled(key: tuple, tracer) -> tuple[float, float | None, int] | None:
@@ -539,29 +539,10 @@ def _reconstruction_late(end: float, pattern: SamplePattern, sample_ids: np.ndar
     """Whether the preview's reconstruction without OIDN, started ``now``
     (default: now), would end after ``end`` (``time.perf_counter()``
     values), from the grid's ids (:data:`RECONSTRUCTION_PER_PIXEL`)."""
-    per_pixel = RECONSTRUCTION_PER_PIXEL + RECONSTRUCTION_PER_EDGE * _edge_share(
+    per_pixel = RECONSTRUCTION_PER_PIXEL + RECONSTRUCTION_PER_EDGE * edge_share(
         sample_ids.reshape(pattern.grid_shape))
     begin = time.perf_counter() if now is None else now
     return begin + per_pixel * pattern.width * pattern.height > end
-
-
-def _edge_share(grid_ids: np.ndarray) -> float:
-    """The share of a grid's samples with a sample of another id beside them
-    (left, right, above or below).
-
-    Examples
-    --------
-    >>> _edge_share(np.array([[1, 1, 2], [1, 1, 2], [1, 1, 2]]))
-    0.6666666666666666
-    """
-    across = grid_ids[:, 1:] != grid_ids[:, :-1]
-    down = grid_ids[1:] != grid_ids[:-1]
-    edge = np.zeros(grid_ids.shape, dtype=bool)
-    edge[:, 1:] |= across
-    edge[:, :-1] |= across
-    edge[1:] |= down
-    edge[:-1] |= down
-    return float(edge.mean()) if edge.size else 0.0
 
 
 def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
@@ -644,10 +625,17 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
         grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
                                                 replay=True)
     host = max(time.perf_counter() - begin - spent.execute, 0.0)
-    pixels = pattern.width * pattern.height
-    return _Probe(grid, host + PASS_OVER_GRID * spent.execute * pixels / pattern.count,
-                  spent.execute, host, recordings() > recorded, min(spent.compile, host),
-                  recorded == 0 < recordings())
+    pass_s = _pass_seconds(host, spent.execute, pattern.width * pattern.height, pattern.count)
+    return _Probe(grid, pass_s, spent.execute, host, recordings() > recorded,
+                  min(spent.compile, host), recorded == 0 < recordings())
+
+
+def _pass_seconds(host: float, execute: float, pixels: int, count: int) -> float:
+    """A pass over ``pixels`` pixels expected from a grid probe of ``count``
+    pixels: what the probe took beyond its kernels (``host``), and its
+    kernels' run time (``execute``) scaled to the pixels, times
+    :data:`PASS_OVER_GRID`."""
+    return host + PASS_OVER_GRID * execute * pixels / count
 
 
 def _passes_fit_unprobed(left: float, pixels: int, quality: str, extra: float = 0.0) -> bool:
