@@ -52,8 +52,10 @@ class MRTResult:
     image : ndarray, shape (height, width, 3)
         The reconstructed linear RGB image.
     ids : ndarray of int64, shape (height, width)
-        Region id of every pixel.
+        Region id of every pixel (a full render's: a read-only view of 0).
     traced_mask : ndarray of bool, shape (height, width)
+        The pixels traced with the nested integrator (a full render's: a
+        read-only view of True).
     pattern : SamplePattern or None
         The traced grid; None when ``auto`` rendered in full.
     trace : SparseTrace
@@ -212,7 +214,7 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     """:func:`render`'s work, its arguments as given: checked, then mode
     ``auto``'s plan and the image it names (:func:`_auto`), or the MRT's
     pipeline in the mode asked for (:func:`_mrt`)."""
-    start, recorded = time.perf_counter(), recorded_so_far()
+    start = time.perf_counter()
     wrapper = unwrap(scene, integrator)
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or _DEFAULTS).with_(**param_overrides)
@@ -220,24 +222,24 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     sensor = resolve_sensor(scene, sensor)
     tracer = GridTracer(scene, sensor, wrapper.nested, _spp_of(spp, sensor), check_seed(seed))
     if mode == "auto":
-        return _auto(tracer, params, start, recorded, progress)
+        return _auto(tracer, params, start, progress)
     width, height = (int(v) for v in sensor.film().crop_size())
     return _mrt(grid_pattern(width, height, params.sample_fraction), tracer, params, mode,
                 None, start, progress or _quiet)
 
 
-def _auto(tracer: GridTracer, params: MRTParams, start: float, recorded: Recorded,
-          progress) -> MRTResult:
+def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTResult:
     """Mode ``auto``: its plan (:mod:`.auto`), then the image the plan names:
     the passes' own, a full render (``mi.render``'s), or the MRT's in the
     plan's mode (checked, :func:`_checked`, where chosen without a pilot);
     what it took kept for the next such plan (``recorded``: the kernel
-    recordings, and their seconds, when the render began)."""
+    recordings, and their seconds, before its first trace)."""
     scene, sensor = tracer.scene, tracer.sensor
     width, height = (int(v) for v in sensor.film().crop_size())
     plan = auto.plan_without_pilot(width, height, tracer.spp, is_jit(), params)
-    pattern = None
+    pattern = recorded = None
     if plan is None:
+        recorded = recorded_so_far()
         pattern = grid_pattern(width, height, params.sample_fraction)
         outcome = auto.run_auto(scene, pattern, tracer, params, start, on_round=progress)
         if outcome.image is not None:
@@ -377,12 +379,26 @@ def _passes_result(outcome: auto_plans.AutoOutcome, tracer: GridTracer, params: 
 def _whole_image_result(image, alpha, params: MRTParams, spp: int, plan: Plan,
                         timings: Timings, start: float) -> MRTResult:
     """The result of an ``auto`` plan that traced every pixel (``plan.choice.name``)."""
-    height, width = image.shape[:2]
-    return MRTResult(image, np.zeros((height, width), dtype=np.int64),
-                     np.ones((height, width), dtype=bool), None, _empty_trace(spp),
+    shape = image.shape[:2]
+    return MRTResult(image, _constant_view(_ZERO_ID, shape), _constant_view(_TRACED, shape),
+                     None, _empty_trace(spp),
                      params, spp, "auto", plan.choice.name,
                      timings.close(time.perf_counter() - start), auto=plan,
-                     traced=TracedCounts(full=height * width), alpha=alpha)
+                     traced=TracedCounts(full=shape[0] * shape[1]), alpha=alpha)
+
+
+#: The one id and the traced flag of a full render's pixels (read-only).
+_ZERO_ID, _TRACED = np.zeros(1, np.int64), np.ones(1, bool)
+_ZERO_ID.flags.writeable = _TRACED.flags.writeable = False
+
+
+def _constant_view(one: np.ndarray, shape: tuple) -> np.ndarray:
+    """A read-only array of ``shape`` whose every element is ``one``'s only
+    one: no memory allocated or written after the render (where the array
+    functions that would, cold in the cache, take a full render's per cent)."""
+    view = np.ndarray(shape, one.dtype, one, strides=(0,) * len(shape))
+    view.flags.writeable = False
+    return view
 
 
 def _empty_trace(spp: int) -> SparseTrace:

@@ -1036,6 +1036,11 @@ def test_small_jobs_render_in_full_without_a_pilot(variant):
     assert result.mode_used == "full" and not result.auto.candidates
     assert "too few samples" in result.auto.reason
     assert np.array_equal(result.image, reference)
+    # one region, every pixel traced: read-only, as the image's size
+    assert result.ids.shape == result.traced_mask.shape == reference.shape[:2]
+    assert not result.ids.any() and result.traced_mask.all()
+    assert not (result.ids.flags.writeable or result.traced_mask.flags.writeable)
+    assert result.traced.full == result.ids.size
 
 
 def test_small_jobs_under_a_time_limit_take_what_fits_it(variant):
