@@ -192,17 +192,24 @@ OVERRUN = 1.1
 
 def _note_overrun(result: MRTResult) -> None:
     """Add to ``result``'s plan a note of a time limit it overran (by more
-    than :data:`OVERRUN`): a limit below what the image can cost here."""
+    than :data:`OVERRUN`): a limit below what the image can cost here, or
+    kernels compiled for it (a scene's first render at an image size on a
+    machine: Mitsuba's camera bakes the film's size into them)."""
     plan = result.auto
     if plan is None or plan.time_limit is None:
         return
     took, limit = result.timings.total, plan.time_limit
     if took > OVERRUN * limit:
-        least = (": the preview is the least this image costs here"
-                 if plan.choice in (auto_limit.PREVIEW, auto_limit.UNDENOISED,
-                                    auto_limit.UPSAMPLED) else "")
+        compiled = result.timings.compile.compiled
+        if compiled:
+            why = (f": it compiled {compiled} kernel{'s' if compiled != 1 else ''}, which "
+                   f"Dr.Jit keeps on disk for later renders")
+        elif plan.choice in (auto_limit.PREVIEW, auto_limit.UNDENOISED, auto_limit.UPSAMPLED):
+            why = ": the preview is the least this image costs here"
+        else:
+            why = ""
         plan.notes.append(f"took {took:.3f} s, {took / limit:.1f}x the time limit of "
-                          f"{limit:.3g} s{least}")
+                          f"{limit:.3g} s{why}")
 
 
 #: The parameters of a render that sets none (frozen: shared).

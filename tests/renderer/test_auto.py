@@ -19,7 +19,7 @@ from mitsuba_mrt.recon.denoise import release
 from mitsuba_mrt.renderer import auto, auto_limit, auto_plans, kept_plans, launch_cost, pilot
 from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
-from mitsuba_mrt.types import Timings
+from mitsuba_mrt.types import KernelCounts, Timings
 
 from helpers import SCENES
 from helpers import ball_scene_xml as scene_xml
@@ -1138,6 +1138,25 @@ def test_a_time_limit_the_render_overran_is_a_note(tmp_path):
     # preview's: without OIDN, then the grid upsampled, as even the fast one would overrun)
     summary = json.loads(next(tmp_path.glob("*.json")).read_text())
     assert notes == ["note: " + note for note in summary["auto"]["notes"]]
+
+
+@pytest.mark.parametrize("compiled", [0, 1, 12])
+def test_an_overrun_note_says_what_compiled(compiled):
+    from mitsuba_mrt.renderer import api
+
+    def noted(took, choice=Candidate("full+oidn", "denoised", 1, denoise=True)):
+        timings = Timings(total=took, compile=KernelCounts(compiled, 3))
+        result = SimpleNamespace(auto=Plan(choice, "", time_limit=0.5), timings=timings)
+        api._note_overrun(result)
+        return result.auto.notes
+    assert noted(0.54) == []  # (within 1.1x the limit)
+    note, = noted(1.5)
+    assert note.startswith("took 1.500 s, 3.0x the time limit of 0.5 s")
+    assert ("compiled" in note) == (compiled > 0)
+    if compiled:
+        assert f": it compiled {compiled} kernel{'s' if compiled > 1 else ''}, which" in note
+    note, = noted(1.5, auto_limit.PREVIEW)  # (what compiled is the reason where any did)
+    assert ("the preview is the least this image costs here" in note) == (not compiled)
 
 
 @pytest.mark.parametrize("option", ["--time-limit", "--noise-threshold"])
