@@ -96,5 +96,28 @@ def squared_error(image: np.ndarray, first: np.ndarray, second: np.ndarray
     [0.08, 0.01]
     """
     image, first, second = (np.clip(v, 0.0, 1.0) for v in (image, first, second))
-    noise = (first - second) ** 2 / 4  # of their mean, in expectation
+    noise = _mean_noise(first, second)
     return (image - (first + second) / 2) ** 2 - noise, noise
+
+
+def _mean_noise(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """The squared noise of the mean of two independent renders of the same
+    pixels, in expectation: a quarter of their squared difference."""
+    return (first - second) ** 2 / 4
+
+
+def render_noise(tracer, xy: np.ndarray) -> np.ndarray:
+    """A full render's squared noise (n, 3) at the pixels ``xy``, at
+    ``tracer``'s spp, before its pixel filter spreads it: ``xy`` traced twice
+    at half the spp in one launch (:data:`~mitsuba_mrt.types.SeedStream.NOISE`:
+    independent of every other trace), the noise of their mean, both
+    clipped to [0, 1] (as :func:`squared_error`'s), for an odd spp scaled to
+    it.  As the check's, it holds whatever stratification the sampler gives
+    the scene's spp, and the noise of a pixel whose samples are rarely
+    bright, which clipping single samples would hide.
+    """
+    half = max(tracer.spp // 2, 1)
+    trace = replace(tracer, spp=half)(np.concatenate([xy, xy]), stream=SeedStream.NOISE,
+                                      aovs=False, replay=True)
+    first, second = (np.clip(v, 0.0, 1.0) for v in np.split(trace.radiance, 2))
+    return _mean_noise(first, second) * (2 * half / tracer.spp)

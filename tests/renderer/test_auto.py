@@ -1463,6 +1463,37 @@ def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
         assert spp[0] == 8 and spp == sorted(spp)
 
 
+@pytest.mark.parametrize("sampler", ["independent", "stratified"])
+def test_the_default_target_is_a_full_render_s_noise_traced_on_the_estimate_strips(
+        variant, monkeypatch, sampler):
+    # the passes' samples, clipped one by one, understate a full render's noise where
+    # bright paths are common; a stratifying sampler's estimates keep their old target
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.renderer.api import GridTracer
+    from mitsuba_mrt.types import SeedStream
+
+    scene = mi.load_string(scene_xml(256, spp=64).replace('type="independent"',
+                                                          f'type="{sampler}"'))
+    traced, original = [], GridTracer.__call__
+
+    def spy(self, pixel_xy, **kwargs):
+        if kwargs.get("stream") == SeedStream.NOISE:
+            traced.append((self.spp, pixel_xy.copy()))
+        return original(self, pixel_xy, **kwargs)
+
+    monkeypatch.setattr(GridTracer, "__call__", spy)
+    result = mitsuba_mrt.render(scene)
+    assert result.mode_used == "full+oidn" and result.auto.target_error > 0
+    if sampler == "stratified":
+        assert traced == []
+        return
+    (spp, xy), = traced  # once, before the rounds: 1024 pixels twice, at half the spp
+    assert spp == 32 and len(xy) == 2 * 1024
+    assert np.array_equal(xy[:1024], xy[1024:]) and len(np.unique(xy[:1024], axis=0)) == 1024
+    assert np.isin(xy[:, 1], progressive.estimate_rows(256, 256)).all()
+    assert result.timings.check > 0  # (its time among the estimates')
+
+
 def test_a_stratifying_sampler_s_estimates_see_its_noise(variant):
     # its odd and even samples, strata of one set, differ by more than two
     # independent halves: on this scene their difference said 0 error at 9

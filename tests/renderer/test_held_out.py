@@ -6,7 +6,9 @@ import pytest
 
 import mitsuba_mrt
 from mitsuba_mrt.renderer.api import GridTracer
-from mitsuba_mrt.renderer.held_out import check_image, held_out_pixels
+from mitsuba_mrt.recon.metrics import relative_error
+from mitsuba_mrt.recon.sampling import every_pixel
+from mitsuba_mrt.renderer.held_out import check_image, held_out_pixels, render_noise
 from mitsuba_mrt.renderer.pilot import effective_area
 
 from helpers import ball_scene_xml
@@ -49,3 +51,21 @@ def test_an_image_traced_everywhere_needs_no_check(variant):
     tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), 4, 0)
     held = check_image(np.zeros((16, 16, 3)), np.ones((16, 16), bool), tracer, 1.0)
     assert (held.error, held.full_error, held.pixels) == (0.0, 0.0, 0)
+
+
+@pytest.mark.parametrize("sampler,spp", [("independent", 16), ("independent", 1),
+                                         ("stratified", 16)])
+def test_render_noise_is_a_full_renders_noise(variant, sampler, spp):
+    # what a full render at the scene's spp differs from the truth by, pixel for
+    # pixel, as a display shows them (1 spp: the halves' 2 scaled to 1)
+    scene = mi.load_string(ball_scene_xml(64, spp=spp, sampler=sampler, max_depth=3))
+    tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), spp, 0)
+    noise = render_noise(tracer, every_pixel(64, 64))
+    assert noise.shape == (64 * 64, 3) and (noise >= 0).all()
+
+    def shown(image):
+        return np.clip(image.reshape(-1, 3), 0.0, 1.0)
+    truth = shown(mitsuba_mrt.render_reference(scene, spp=1024, seed=99)[0])
+    squared = np.mean([(shown(mitsuba_mrt.render_reference(scene, seed=s)[0]) - truth) ** 2
+                       for s in range(4)], axis=0)
+    assert 0.8 < relative_error(noise, truth) / relative_error(squared, truth) < 1.25
