@@ -1427,24 +1427,33 @@ def test_passes_that_estimate_nothing_ask_their_traces_for_no_variance(timed_tra
     assert asked and all(asked)
 
 
+def _default_render_traced(monkeypatch, sampler: str, heard):
+    """The default render of a ball scene at 256 px and 64 spp with ``sampler``;
+    ``heard(tracer, pixel_xy, kwargs)`` is told of each of its traces."""
+    from mitsuba_mrt.renderer.api import GridTracer
+
+    scene = mi.load_string(scene_xml(256, spp=64).replace('type="independent"',
+                                                          f'type="{sampler}"'))
+    original = GridTracer.__call__
+
+    def spy(self, pixel_xy, **kwargs):
+        heard(self, pixel_xy, kwargs)
+        return original(self, pixel_xy, **kwargs)
+    monkeypatch.setattr(GridTracer, "__call__", spy)
+    return mitsuba_mrt.render(scene)
+
+
 @pytest.mark.parametrize("sampler", ["independent", "stratified"])
 def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
         variant, monkeypatch, sampler):
     # its halves the launch's odd and even samples: one launch keeps a
     # stratifying sampler's strata whole, as the alternative's single render does
-    from mitsuba_mrt.renderer.api import GridTracer
+    seen = []
 
-    scene = mi.load_string(scene_xml(256, spp=64).replace('type="independent"',
-                                                          f'type="{sampler}"'))
-    seen, original = [], GridTracer.__call__
-
-    def spy(self, pixel_xy, **kwargs):
+    def passes(tracer, pixel_xy, kwargs):
         if kwargs.get("box"):  # the passes' launches
-            seen.append((self.spp, kwargs.get("halves", False), len(pixel_xy)))
-        return original(self, pixel_xy, **kwargs)
-
-    monkeypatch.setattr(GridTracer, "__call__", spy)
-    result = mitsuba_mrt.render(scene)
+            seen.append((tracer.spp, kwargs.get("halves", False), len(pixel_xy)))
+    result = _default_render_traced(monkeypatch, sampler, passes)
     assert result.mode_used == "full+oidn"
     rounds = [s for s in seen if s[2] == 256 * 256]
     spp = [s for s, _, _ in rounds]
@@ -1469,20 +1478,14 @@ def test_the_default_target_is_a_full_render_s_noise_traced_on_the_estimate_stri
     # the passes' samples, clipped one by one, understate a full render's noise where
     # bright paths are common; a stratifying sampler's estimates keep their old target
     from mitsuba_mrt.renderer import progressive
-    from mitsuba_mrt.renderer.api import GridTracer
     from mitsuba_mrt.types import SeedStream
 
-    scene = mi.load_string(scene_xml(256, spp=64).replace('type="independent"',
-                                                          f'type="{sampler}"'))
-    traced, original = [], GridTracer.__call__
+    traced = []
 
-    def spy(self, pixel_xy, **kwargs):
+    def noise(tracer, pixel_xy, kwargs):
         if kwargs.get("stream") == SeedStream.NOISE:
-            traced.append((self.spp, pixel_xy.copy()))
-        return original(self, pixel_xy, **kwargs)
-
-    monkeypatch.setattr(GridTracer, "__call__", spy)
-    result = mitsuba_mrt.render(scene)
+            traced.append((tracer.spp, pixel_xy.copy()))
+    result = _default_render_traced(monkeypatch, sampler, noise)
     assert result.mode_used == "full+oidn" and result.auto.target_error > 0
     if sampler == "stratified":
         assert traced == []
