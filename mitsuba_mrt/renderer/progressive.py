@@ -33,10 +33,9 @@ odd and even samples: some of those pixels traced twice at half the
 scene's spp (:func:`~.held_out.render_noise`).  With a sampler that
 stratifies it is the passes' samples' variance over the scene's spp, as if
 they were independent, which overstates a full render's noise: there the
-estimates are of a round's image denoised on the strips alone, whose
-error is 1.5-2 times the final image's (``instanced`` and
-``spot_textures`` at 256 px), and a traced target ran their passes to
-2-3 times the spp, for 0.6-0.7 times a full render's error.
+estimates are of a round's image denoised on the strips alone, which has
+more error than the final image, and a traced target ran the passes on
+well past a full render's quality.
 Under a time limit alone no error is estimated: the passes only fill the
 time, less what the last OIDN call is expected to take
 (:func:`~mitsuba_mrt.recon.denoise.expected_seconds`): a launch of 1 spp,
@@ -657,9 +656,9 @@ def _trace_noise(passes: Passes, tracer, xy: np.ndarray) -> None:
     """The default target's noise (:attr:`Passes.noise`): a full render's at
     :data:`~.held_out.CHECK_SHARE` of the image's pixels (at least
     :data:`~.held_out.CHECK_MIN`), spread evenly over the estimate strips.
-    The passes' samples, each clipped to what a display shows, said 0.6-0.8
-    times the truth on four of the five gallery scenes this serves at 256 px
-    (bright paths clipped one by one, where a full render's mean keeps them)."""
+    The passes' samples, each clipped to what a display shows, understate it
+    where bright paths are common: they are clipped one by one, where a full
+    render's mean keeps them."""
     crop = passes.crop
     count = min(len(crop), max(CHECK_MIN, round(CHECK_SHARE * len(xy))))
     passes.noise_at = (np.arange(count) * len(crop)) // count
