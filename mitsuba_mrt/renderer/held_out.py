@@ -56,11 +56,23 @@ def held_out_pixels(traced: np.ndarray, share: float = CHECK_SHARE,
     >>> held_out_pixels(traced, share=0.25, minimum=2).tolist()
     [1, 5, 9, 13]
     """
-    untraced = np.flatnonzero(~traced.ravel())
-    count = min(len(untraced), max(minimum, int(round(share * traced.size))))
+    return spread(np.flatnonzero(~traced.ravel()), traced.size, share, minimum)
+
+
+def spread(candidates: np.ndarray, pixels: int, share: float = CHECK_SHARE,
+           minimum: int = CHECK_MIN) -> np.ndarray:
+    """``share`` of an image's ``pixels`` (at least ``minimum``, at most all
+    of them) of ``candidates``, spread evenly over them in their order.
+
+    Examples
+    --------
+    >>> spread(np.arange(10, 20), 40, share=0.1, minimum=2).tolist()
+    [10, 12, 15, 17]
+    """
+    count = min(len(candidates), max(minimum, int(round(share * pixels))))
     if count == 0:
-        return untraced
-    return untraced[(np.arange(count) * len(untraced)) // count]
+        return candidates
+    return candidates[(np.arange(count) * len(candidates)) // count]
 
 
 def check_image(image: np.ndarray, traced: np.ndarray, tracer, area: float) -> HeldOut:

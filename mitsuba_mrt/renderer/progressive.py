@@ -60,7 +60,7 @@ from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..runtime.jit import kernel_seconds
 from ..types import SeedStream
-from .held_out import CHECK_MIN, CHECK_SHARE, render_noise
+from .held_out import render_noise, spread
 from .launch_cost import ROUND_SAFETY, LaunchCost
 from .replay import recording_seconds, recordings
 from .scene_query import sample_count_at_most, sampler_bakes_spp
@@ -451,8 +451,8 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
     of the image denoised from half the passes so far (its history), the
     prediction for all of them, and a full render's own at ``full_spp``;
     without ``denoise``, the passes' mean's error."""
-    variance = passes.variance
     if not denoise:
+        variance = passes.variance
         mean = (passes.halves[0] if passes.companion is not None
                 else passes.halves[0] + passes.halves[1]) / passes.count
         progress.predicted = relative_error(variance / passes.count, mean)
@@ -467,7 +467,7 @@ def _estimate(passes: Passes, progress: Progress, width: int, quality: str, full
                                                                    denoised[both])))
     progress.predicted = predict(progress.history, passes.count)
     if passes.noise is None:
-        progress.full_error = relative_error(variance / (full_spp * area), denoised)
+        progress.full_error = relative_error(passes.variance / (full_spp * area), denoised)
     else:
         progress.full_error = relative_error(passes.noise / area, denoised[passes.noise_at])
 
@@ -659,10 +659,8 @@ def _trace_noise(passes: Passes, tracer, xy: np.ndarray) -> None:
     The passes' samples, each clipped to what a display shows, understate it
     where bright paths are common: they are clipped one by one, where a full
     render's mean keeps them."""
-    crop = passes.crop
-    count = min(len(crop), max(CHECK_MIN, round(CHECK_SHARE * len(xy))))
-    passes.noise_at = (np.arange(count) * len(crop)) // count
-    passes.noise = render_noise(tracer, xy[crop[passes.noise_at]])
+    passes.noise_at = spread(np.arange(len(passes.crop)), len(xy))
+    passes.noise = render_noise(tracer, xy[passes.crop[passes.noise_at]])
 
 
 @dataclass
