@@ -380,9 +380,6 @@ class SeedStream(enum.IntEnum):
     REFERENCE = 6
     #: ``auto``'s check of an MRT image (:mod:`mitsuba_mrt.renderer.held_out`)
     CHECK = 7
-    #: ``auto``'s passes: a full render's noise on their estimate strips
-    #: (:func:`mitsuba_mrt.renderer.held_out.render_noise`)
-    NOISE = 8
     LADDER = 16
     #: ``auto``'s preview: its grid's k-th launch after the first (``PREVIEW + k``)
     PREVIEW = 4096

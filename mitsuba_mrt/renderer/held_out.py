@@ -118,18 +118,31 @@ def _mean_noise(first: np.ndarray, second: np.ndarray) -> np.ndarray:
     return (first - second) ** 2 / 4
 
 
-def render_noise(tracer, xy: np.ndarray) -> np.ndarray:
-    """A full render's squared noise (n, 3) at the pixels ``xy``, at
-    ``tracer``'s spp, before its pixel filter spreads it: ``xy`` traced twice
-    at half the spp in one launch (:data:`~mitsuba_mrt.types.SeedStream.NOISE`:
-    independent of every other trace), the noise of their mean, both
-    clipped to [0, 1] (as :func:`squared_error`'s), for an odd spp scaled to
-    it.  As the check's, it holds whatever stratification the sampler gives
-    the scene's spp, and the noise of a pixel whose samples are rarely
-    bright, which clipping single samples would hide.
+def noise_lanes(xy: np.ndarray, spp: int, full_spp: int) -> tuple[np.ndarray, int]:
+    """(the lanes that trace a full render's noise at the pixels ``xy`` in
+    a launch of ``spp`` samples a lane, the lanes a half takes): ``xy``
+    ``2 k`` times over, so that each half, ``k`` lanes a pixel, holds about
+    half of ``full_spp``, the scene's spp (:func:`lanes_noise`).
+
+    Examples
+    --------
+    >>> lanes, k = noise_lanes(np.array([[3, 4], [5, 6]]), 8, 64)
+    >>> k, len(lanes), lanes[2].tolist()
+    (4, 16, [3, 4])
     """
-    half = max(tracer.spp // 2, 1)
-    trace = replace(tracer, spp=half)(np.concatenate([xy, xy]), stream=SeedStream.NOISE,
-                                      aovs=False, replay=True)
-    first, second = (np.clip(v, 0.0, 1.0) for v in np.split(trace.radiance, 2))
-    return _mean_noise(first, second) * (2 * half / tracer.spp)
+    k = max(1, round(max(full_spp // 2, 1) / spp))
+    return np.tile(xy, (2 * k, 1)), k
+
+
+def lanes_noise(radiance: np.ndarray, k: int, spp: int, full_spp: int) -> np.ndarray:
+    """A full render's squared noise (n, 3) at ``full_spp`` per pixel,
+    before its pixel filter spreads it, from the ``radiance`` of
+    :func:`noise_lanes`' lanes traced at ``spp``: the noise of the mean of
+    the two halves' means, both clipped to [0, 1] (as
+    :func:`squared_error`'s), scaled from the halves' ``2 k spp`` samples to
+    ``full_spp``.  As the check's, it holds whatever stratification the
+    sampler gives a lane's samples, and the noise of a pixel whose samples
+    are rarely bright, which clipping single samples would hide.
+    """
+    first, second = np.clip(radiance.reshape(2, k, -1, 3).mean(axis=1), 0.0, 1.0)
+    return _mean_noise(first, second) * (2 * k * spp / full_spp)

@@ -28,9 +28,11 @@ lanes, so other random numbers), less those pixels' noise (half the two's square
 difference).  It is measured on a quarter of the
 rows (:func:`estimate_rows`), so that it costs a fraction of an OIDN call.
 The default target, a full render's own error at the scene's spp, is
-measured there too, before the first round, where a round's halves are its
-odd and even samples: some of those pixels traced twice at half the
-scene's spp (:func:`~.held_out.render_noise`).  With a sampler that
+measured there too, where a round's halves are its odd and even samples:
+some of those pixels traced again in the first round's launch, after the
+image's, as lanes enough for two halves of half the scene's spp each
+(:func:`~.held_out.noise_lanes`; one launch records one kernel layout, not
+two).  With a sampler that
 stratifies it is the passes' samples' variance over the scene's spp, as if
 they were independent, which overstates a full render's noise: there the
 estimates are of a round's image denoised on the strips alone, which has
@@ -60,7 +62,7 @@ from ..recon.metrics import relative_error
 from ..recon.sampling import every_pixel
 from ..runtime.jit import kernel_seconds
 from ..types import SeedStream
-from .held_out import render_noise, spread
+from .held_out import lanes_noise, noise_lanes, spread
 from .launch_cost import ROUND_SAFETY, LaunchCost
 from .replay import recording_seconds, recordings
 from .scene_query import sample_count_at_most, sampler_bakes_spp
@@ -146,10 +148,14 @@ class Passes:
     textured: np.ndarray | None = None
     companion: np.ndarray | None = None
     estimated: bool = True
-    #: A full render's squared noise (:func:`~.held_out.render_noise`) at the
-    #: positions ``noise_at`` of ``crop``: the default target's, where traced.
+    #: A full render's squared noise (:func:`~.held_out.lanes_noise`) at the
+    #: positions ``noise_at`` of ``crop``: the default target's, where traced;
+    #: until the first launch traces it, the pixels and the scene's spp
+    #: (``noise_due``), and then its share of that launch's seconds (``noise_s``).
     noise: np.ndarray | None = None
     noise_at: np.ndarray | None = None
+    noise_due: tuple | None = None
+    noise_s: float = 0.0
 
     def add(self, trace, half: int | None, guides: bool) -> None:
         """Add ``trace`` (every pixel, at its spp) to half 0 or 1, or, for
@@ -433,13 +439,21 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     """
     companion = half is None and passes.companion is not None
     pixels = np.concatenate([xy, xy[passes.crop[passes.companion]]]) if companion else xy
+    if passes.noise_due is not None:  # (after the image's pixels, as a companion's)
+        lanes, k = noise_lanes(passes.noise_due[0], spp, passes.noise_due[1])
+        pixels = np.concatenate([pixels, lanes])
     trace = replace(tracer, spp=spp)(pixels, stream=SeedStream.LADDER + launch, aovs=guides,
                                      ids=False, box=True, replay=True,
                                      halves=half is None and not companion,
                                      variance=passes.estimated)
+    if passes.noise_due is not None:
+        passes.noise = lanes_noise(trace.radiance[len(pixels) - len(lanes):], k, spp,
+                                   passes.noise_due[1])
+        passes.noise_due = None
+        trace = trace.take(slice(0, len(pixels) - len(lanes)))
     if not companion:
         passes.add(trace, half, guides)
-        return 1.0
+        return len(xy) / len(pixels)
     passes.add(trace.take(slice(0, len(xy))), 0, guides)
     passes.add_companion(trace.take(slice(len(xy), None)))
     return len(xy) / len(pixels)
@@ -540,7 +554,7 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
     pixels alone (its trace kernels' time scaled to their share), and whether it
     recorded: a time limit alone traces no companion, and plans its
     launches from these."""
-    guides = passes.count < passes.guide_spp
+    guides, noise = passes.count < passes.guide_spp, passes.noise_due is not None
     begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
     count = passes.count
     with kernel_seconds() as spent:
@@ -550,6 +564,8 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
     # kernels, which run, or compile, when read back after it
     recording_s = recording_seconds() - recording
     alone = recording_s + share * (seconds - recording_s)
+    if noise:  # (the noise's lanes: Passes.noise_s)
+        passes.noise_s = (1.0 - share) * (seconds - recording_s)
     cost.add(passes.count - count, alone, recordings() > recorded, spent.compile,
              None if not spent.widest else share * spent.widest, recording_s=recording_s)
     return seconds
@@ -568,7 +584,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     a full render's own error there at ``full_spp``, the scene's spp, with a
     pixel filter of effective ``area``
     (:func:`mitsuba_mrt.renderer.pilot.effective_area`): traced where the
-    image is denoised and the sampler does not stratify (:func:`_trace_noise`),
+    image is denoised and the sampler does not stratify (:func:`_noise_due`),
     else from the passes' own samples (see the module).  ``deadline``
     is a ``time.perf_counter()`` value.  ``stop_early(progress, pass_s)``,
     called after every round, may end the passes (return a reason).
@@ -594,9 +610,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     layout = _lay_out(passes, tracer, len(rows), width, n, fixed, deadline, target_error)
     if (layout.estimates and denoise and target_error is None and deadline is None
             and passes.companion is None):
-        begin = time.perf_counter()
-        _trace_noise(passes, tracer, xy)
-        progress.estimate_s += time.perf_counter() - begin
+        _noise_due(passes, xy, full_spp)
     cost = LaunchCost(spp_compiles=layout.bakes) if cost is None else cost
     final, quality = quality, preset(quality)  # (the estimates' preset)
     round_size, oidn_s = _first_round(fixed, layout.estimates, deadline, target_error, cost,
@@ -610,8 +624,11 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         launch = _trace_round(passes, tracer, xy, round_size, launch, layout.estimates, cost)
         if surfaces is not None and denoise:
             passes.find_textured(surfaces, max_spp)
-        spent = time.perf_counter() - begin
+        # (the noise's lanes in the first launch are the estimates' time)
+        spent = time.perf_counter() - begin - passes.noise_s
+        progress.estimate_s += passes.noise_s
         progress.trace_s += spent
+        passes.noise_s = 0.0
         progress.spp = passes.count
         next_size = passes.count  # the next round doubles the passes
         next_size = next_size if layout.exact is None else layout.exact(next_size)
@@ -652,15 +669,16 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
             (passes.alpha / passes.count).reshape(height, width), progress)
 
 
-def _trace_noise(passes: Passes, tracer, xy: np.ndarray) -> None:
-    """The default target's noise (:attr:`Passes.noise`): a full render's at
+def _noise_due(passes: Passes, xy: np.ndarray, full_spp: int) -> None:
+    """Have the first launch trace the default target's noise
+    (:attr:`Passes.noise`): a full render's at ``full_spp``, at
     :data:`~.held_out.CHECK_SHARE` of the image's pixels (at least
     :data:`~.held_out.CHECK_MIN`), spread evenly over the estimate strips.
     The passes' samples, each clipped to what a display shows, understate it
     where bright paths are common: they are clipped one by one, where a full
     render's mean keeps them."""
     passes.noise_at = spread(np.arange(len(passes.crop)), len(xy))
-    passes.noise = render_noise(tracer, xy[passes.crop[passes.noise_at]])
+    passes.noise_due = (xy[passes.crop[passes.noise_at]], full_spp)
 
 
 @dataclass

@@ -1458,7 +1458,11 @@ def test_the_default_target_s_first_round_is_one_launch_of_an_eighth_of_the_spp(
     rounds = [s for s in seen if s[2] == 256 * 256]
     spp = [s for s, _, _ in rounds]
     if sampler == "independent":
-        assert rounds == seen and all(halves for _, halves, _ in seen)
+        # the first launch also traces the target's noise, after the image's pixels
+        rounds = [(s, halves, min(n, 256 * 256)) for s, halves, n in seen]
+        spp = [s for s, _, _ in rounds]
+        assert seen[0][2] > 256 * 256 and all(n == 256 * 256 for _, _, n in seen[1:])
+        assert all(halves for _, halves, _ in seen)
         # a later round adds at most as many passes as there are
         assert spp[0] == 8 and all(s <= sum(spp[:k]) for k, s in enumerate(spp) if k)
     else:
@@ -1483,18 +1487,22 @@ def test_the_default_target_is_a_full_render_s_noise_traced_on_the_estimate_stri
     traced = []
 
     def noise(tracer, pixel_xy, kwargs):
-        if kwargs.get("stream") == SeedStream.NOISE:
-            traced.append((tracer.spp, pixel_xy.copy()))
+        if kwargs.get("box") and len(pixel_xy) > 256 * 256:
+            traced.append((tracer.spp, kwargs.get("stream"), pixel_xy[256 * 256:].copy()))
     result = _default_render_traced(monkeypatch, sampler, noise)
     assert result.mode_used == "full+oidn" and result.auto.target_error > 0
-    if sampler == "stratified":
-        assert traced == []
+    if sampler == "stratified":  # (its launches' companion: every other estimated row)
+        assert all(len(xy) == len(progressive.estimate_rows(256, 256)) // 2 * 256
+                   for _, _, xy in traced)
         return
-    (spp, xy), = traced  # once, before the rounds: 1024 pixels twice, at half the spp
-    assert spp == 32 and len(xy) == 2 * 1024
-    assert np.array_equal(xy[:1024], xy[1024:]) and len(np.unique(xy[:1024], axis=0)) == 1024
+    # in the first launch alone, after the image's pixels: 1024 pixels in lanes
+    # of the round's 8 spp, two halves of 4 lanes, 32 spp each, half the scene's
+    (spp, stream, xy), = traced
+    assert spp == 8 and stream == SeedStream.LADDER and len(xy) == 8 * 1024
+    assert all(np.array_equal(xy[:1024], xy[k * 1024:(k + 1) * 1024]) for k in range(8))
+    assert len(np.unique(xy[:1024], axis=0)) == 1024
     assert np.isin(xy[:, 1], progressive.estimate_rows(256, 256)).all()
-    assert result.timings.check > 0  # (its time among the estimates')
+    assert result.timings.check > 0  # (its share of the launch among the estimates')
 
 
 def test_a_stratifying_sampler_s_estimates_see_its_noise(variant):

@@ -8,8 +8,9 @@ import mitsuba_mrt
 from mitsuba_mrt.renderer.api import GridTracer
 from mitsuba_mrt.recon.metrics import relative_error
 from mitsuba_mrt.recon.sampling import every_pixel
-from mitsuba_mrt.renderer.held_out import check_image, held_out_pixels, render_noise
+from mitsuba_mrt.renderer.held_out import check_image, held_out_pixels, lanes_noise, noise_lanes
 from mitsuba_mrt.renderer.pilot import effective_area
+from mitsuba_mrt.types import SeedStream
 
 from helpers import ball_scene_xml
 
@@ -53,14 +54,19 @@ def test_an_image_traced_everywhere_needs_no_check(variant):
     assert (held.error, held.full_error, held.pixels) == (0.0, 0.0, 0)
 
 
-@pytest.mark.parametrize("sampler,spp", [("independent", 16), ("independent", 1),
-                                         ("stratified", 16)])
-def test_render_noise_is_a_full_renders_noise(variant, sampler, spp):
+@pytest.mark.parametrize("sampler,spp,lane_spp", [
+    ("independent", 16, 8), ("independent", 1, 1), ("independent", 64, 8),
+    ("stratified", 16, 8)])
+def test_lanes_noise_is_a_full_renders_noise(variant, sampler, spp, lane_spp):
     # what a full render at the scene's spp differs from the truth by, pixel for
-    # pixel, as a display shows them (1 spp: the halves' 2 scaled to 1)
+    # pixel, as a display shows them, from lanes of ``lane_spp`` (1 spp: the
+    # halves' 2 scaled to 1; at 64 spp four lanes a half, as the passes trace it)
     scene = mi.load_string(ball_scene_xml(64, spp=spp, sampler=sampler, max_depth=3))
-    tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), spp, 0)
-    noise = render_noise(tracer, every_pixel(64, 64))
+    tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), lane_spp, 0)
+    lanes, k = noise_lanes(every_pixel(64, 64), lane_spp, spp)
+    assert k == (4 if spp == 64 else 1)
+    noise = lanes_noise(tracer(lanes, stream=SeedStream.CHECK, aovs=False).radiance, k,
+                        lane_spp, spp)
     assert noise.shape == (64 * 64, 3) and (noise >= 0).all()
 
     def shown(image):
