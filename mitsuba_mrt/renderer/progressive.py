@@ -119,8 +119,8 @@ class Passes:
     ``halves``, the sums of the two independent halves over the pixels of
     ``crop`` alone, each trace's half means clipped at :data:`ESTIMATE_CLIP`
     first, so that a rare bright sample (a caustic's firefly) does not swamp
-    what the other pixels say; and for the variance, ``clipped`` and
-    ``square``, the sums of each trace's pixel means and of its samples'
+    what the other pixels say; and for the variance (where
+    :attr:`reads_variance`), ``clipped`` and ``square``, the sums of each trace's pixel means and of its samples'
     squares, means and variances clipped likewise.  ``guides`` counts the
     samples that traced the guides, ``guide_spp`` how many should.  Counts
     are samples per pixel.  Without ``estimated`` (nothing is estimated: a
@@ -195,9 +195,10 @@ class Passes:
         else:
             self.halves[half] += spp * clipped
             self.half_counts[half] += spp
-        self.square += spp * (np.minimum(trace.variance[self.crop], ESTIMATE_CLIP ** 2)
-                              + clipped ** 2)
-        self.clipped += spp * clipped
+        if self.reads_variance:
+            self.square += spp * (np.minimum(trace.variance[self.crop], ESTIMATE_CLIP ** 2)
+                                  + clipped ** 2)
+            self.clipped += spp * clipped
 
     def add_companion(self, trace) -> None:
         """Add ``trace`` (the pixels ``crop[companion]``, independent of the
@@ -262,6 +263,13 @@ class Passes:
         samples' variance, clipped per trace, is not."""
         a, b = self.half_counts
         return (self.half_mean(0) - self.half_mean(1)) ** 2 * (a / (a + b))
+
+    @property
+    def reads_variance(self) -> bool:
+        """Whether the estimates read :attr:`variance`: not where a full
+        render's noise is traced (:attr:`noise`), which the halves' own
+        difference then meets; the launches develop it only where they do."""
+        return self.estimated and self.noise is None and self.noise_due is None
 
     @property
     def variance(self) -> np.ndarray:
@@ -445,7 +453,7 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     trace = replace(tracer, spp=spp)(pixels, stream=SeedStream.LADDER + launch, aovs=guides,
                                      ids=False, box=True, replay=True,
                                      halves=half is None and not companion,
-                                     variance=passes.estimated)
+                                     variance=passes.reads_variance)
     if passes.noise_due is not None:
         passes.noise = lanes_noise(trace.radiance[len(pixels) - len(lanes):], k, spp,
                                    passes.noise_due[1])

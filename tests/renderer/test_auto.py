@@ -1425,6 +1425,12 @@ def test_passes_that_estimate_nothing_ask_their_traces_for_no_variance(timed_tra
     # the estimates read it
     progressive.run_passes(Spy(), 2, 2, target_error=0.01, deadline=None, **common)
     assert asked and all(asked)
+    asked.clear()
+    # but not for the default target where a full render's noise is traced (the
+    # halves' difference meets it)
+    progressive.run_passes(Spy(), 8, 8, target_error=None, deadline=None,
+                           **dict(common, denoise=True))
+    assert asked and not any(asked)
 
 
 def _default_render_traced(monkeypatch, sampler: str, heard):
