@@ -120,8 +120,9 @@ class Passes:
     ``crop`` alone, each trace's half means clipped at :data:`ESTIMATE_CLIP`
     first, so that a rare bright sample (a caustic's firefly) does not swamp
     what the other pixels say; and for the variance (where
-    :attr:`reads_variance`), ``clipped`` and ``square``, the sums of each trace's pixel means and of its samples'
-    squares, means and variances clipped likewise.  ``guides`` counts the
+    :attr:`reads_variance`), ``clipped`` and ``square``, the sums of each
+    trace's pixel means and of its samples' squares, means and variances
+    clipped likewise.  ``guides`` counts the
     samples that traced the guides, ``guide_spp`` how many should.  Counts
     are samples per pixel.  Without ``estimated`` (nothing is estimated: a
     time limit alone, a plan an earlier render measured) only the image,
