@@ -239,8 +239,8 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     """Mode ``auto``: its plan (:mod:`.auto`), then the image the plan names:
     the passes' own, a full render (``mi.render``'s), or the MRT's in the
     plan's mode (checked, :func:`_checked`, where chosen without a pilot);
-    what it took kept for the next such plan (``recorded``: the kernel
-    recordings, and their seconds, before its first trace)."""
+    what it took kept for the next such plan, with the kernel recordings it
+    made (counted from before its first trace)."""
     scene, sensor = tracer.scene, tracer.sensor
     width, height = (int(v) for v in sensor.film().crop_size())
     plan = auto.plan_without_pilot(width, height, tracer.spp, is_jit(), params)

@@ -32,12 +32,11 @@ measured there too, where a round's halves are its odd and even samples:
 some of those pixels traced again in the first round's launch, after the
 image's, as lanes enough for two halves of half the scene's spp each
 (:func:`~.held_out.noise_lanes`; one launch records one kernel layout, not
-two).  With a sampler that
-stratifies it is the passes' samples' variance over the scene's spp, as if
-they were independent, which overstates a full render's noise: there the
-estimates are of a round's image denoised on the strips alone, which has
-more error than the final image, and a traced target ran the passes on
-well past a full render's quality.
+two).  With a sampler that stratifies it is the passes' samples' variance
+over the scene's spp, as if they were independent, which overstates a full
+render's noise: there the estimates are of a round's image denoised on the
+strips alone, which has more error than the final image, and a traced
+target ran the passes on well past a full render's quality.
 Under a time limit alone no error is estimated: the passes only fill the
 time, less what the last OIDN call is expected to take
 (:func:`~mitsuba_mrt.recon.denoise.expected_seconds`): a launch of 1 spp,
@@ -437,8 +436,9 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
     into ``half`` of ``passes`` (None: its even and odd samples into each,
     or with :attr:`Passes.companion` all of it into half 0, and in the same
     launch the companion's pixels into half 1), with the guides where
-    ``guides``; the share of the launch's pixels that are the image's is
-    returned.
+    ``guides``, and where :attr:`Passes.noise_due` the target's noise lanes
+    after them (:attr:`Passes.noise`); the share of the launch's lanes that
+    are the image's pixels is returned.
 
     The companion's pixels follow the image's in one launch: a sampler draws
     each lane's numbers apart (a stratifying one permutes each pixel slot's
@@ -460,11 +460,11 @@ def _trace_pass(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int,
                                    passes.noise_due[1])
         passes.noise_due = None
         trace = trace.take(slice(0, len(pixels) - len(lanes)))
-    if not companion:
+    if companion:
+        passes.add(trace.take(slice(0, len(xy))), 0, guides)
+        passes.add_companion(trace.take(slice(len(xy), None)))
+    else:
         passes.add(trace, half, guides)
-        return len(xy) / len(pixels)
-    passes.add(trace.take(slice(0, len(xy))), 0, guides)
-    passes.add_companion(trace.take(slice(len(xy), None)))
     return len(xy) / len(pixels)
 
 
