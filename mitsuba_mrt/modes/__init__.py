@@ -8,21 +8,16 @@ here and a line in the table.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
-
-import numpy as np
 
 from ..errors import MRTError
-from ..recon.bounds import suppress_fireflies
-from ..recon.compose import safe_albedo
 from ..recon.sampling import SamplePattern
-from ..recon.smooth import smooth_grid
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer, check_radiance
 from .baselines import bicubic_reconstruct, nearest_reconstruct
 from .fast import fast_reconstruct
 from .idpass import idpass_reconstruct
 from .paper import paper_reconstruct
 from .refine import refine_reconstruct
+from .smoothing import SMOOTHED_BESIDE, smoothed_trace
 
 #: Reconstruction modes by name: ``fn(pattern, trace, params, tracer) -> Reconstruction``.
 MODES = {
@@ -48,11 +43,6 @@ TRACING_MODES = ("refine", "idpass")
 #: edges and rough cells, a fifth to two fifths of an ordinary scene's pixels)
 #: carry the noise of their spp, which the grid's denoising does not reach.
 OUTPUT_DENOISED_MODES = ("refine",)
-
-#: Modes whose grid is smoothed within the noise first (``params.noise_smoothing``);
-#: ``paper`` stays the report's, the baselines plain.
-SMOOTHED_MODES = ("fast", "refine", "idpass")
-
 
 def check_mode(mode: str, choices: tuple[str, ...] | None = None) -> str:
     """``mode`` if it is one of ``choices`` (default: :data:`MODES`), else MRTError."""
@@ -108,38 +98,10 @@ def reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTParams = 
         raise MRTError(f"expected {n} traced samples with radiance, albedo and ids, got {shapes}")
     check_radiance(trace.radiance)
     start = time.perf_counter()
-    smoothed = smoothed_trace(pattern, trace, params, mode)
+    smoothed = trace if mode in SMOOTHED_BESIDE else smoothed_trace(pattern, trace, params, mode)
     seconds = time.perf_counter() - start
     recon = MODES[mode](pattern, smoothed, params, tracer)
     if smoothed is not trace:  # traced pixels keep what was traced
         pattern.put_traced(recon.image, trace.radiance)
         recon.timings.interpolate += seconds
     return recon
-
-
-def smoothed_trace(pattern: SamplePattern, trace: SparseTrace, params: MRTParams,
-                   mode: str) -> SparseTrace:
-    """``trace`` with its grid radiance smoothed within the noise
-    (:func:`mitsuba_mrt.recon.smooth.smooth_grid` on radiance / albedo, so
-    textures are not blurred), or ``trace`` itself where that does not apply:
-    modes outside :data:`SMOOTHED_MODES`, ``noise_smoothing`` 0, no variance
-    or only zeros (a deterministic trace), or a denoised grid.  Fireflies are left to the modes.
-    """
-    if (mode not in SMOOTHED_MODES or params.noise_smoothing <= 0 or trace.variance is None
-            or params.denoise != "none" or not trace.variance.any()):
-        return trace
-    grid = pattern.grid_shape + (3,)
-    albedo = safe_albedo(trace.albedo)
-    values = (np.asarray(trace.radiance, dtype=np.float64) / albedo).reshape(grid)  # demodulated
-    # (in place where the arrays are this function's own: a fresh array costs its pages)
-    noise = np.multiply(albedo, trace.spp)
-    noise *= albedo
-    noise = np.divide(trace.variance, noise, out=noise).reshape(grid)
-    ids = trace.ids(params.rule_for(mode)).reshape(pattern.grid_shape)
-    suppressed, fireflies = suppress_fireflies(ids, values)
-    fixed = (suppressed != values).any(axis=-1) if fireflies else None
-    out = smooth_grid(ids, values, noise, params.noise_smoothing, fixed)
-    kept = (out == values).reshape(-1, 3)
-    radiance = np.multiply(out.reshape(-1, 3), albedo, out=albedo)
-    np.copyto(radiance, trace.radiance, where=kept)
-    return replace(trace, radiance=radiance)

@@ -6,7 +6,9 @@ nearest column, chosen independently), then the report's Gaussian smoothing
 ids in an order their samples decide (most samples first,
 :func:`mitsuba_mrt.recon.edges.geometric_order`) rather than by number, so
 that renumbering the shapes changes nothing; the traced pixels keep their
-traced ids.  Values come from :mod:`mitsuba_mrt.recon.within_region`; a surface's
+traced ids.  Values come from :mod:`mitsuba_mrt.recon.within_region`, of
+the grid smoothed within its noise (:mod:`.smoothing`) on a worker thread
+while the ids are found; a surface's
 pixels within the pixel filter's reach of a light take theirs from the
 samples there alone (:func:`~mitsuba_mrt.recon.ids.light_halo`).
 Nothing is traced beyond the grid.
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from functools import partial
 
 import numpy as np
 
@@ -25,6 +28,7 @@ from ..recon.sampling import SamplePattern
 from ..recon.within_region import TracedGridValues
 from ..runtime.threads import beside
 from ..types import MRTParams, Reconstruction, Skips, SparseTrace, Timings, Tracer
+from .smoothing import smoothed_radiance, smooths
 
 
 def skips_from(counts: Counter) -> Skips:
@@ -53,7 +57,8 @@ def _lights_apart(pattern: SamplePattern, trace: SparseTrace, values: TracedGrid
     if (apart != sample_ranks).any():
         values.early.result()  # (its values are of the ranks before)
         values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, apart,
-                                        background, trace.albedo_per_shape)
+                                        background, trace.albedo_per_shape,
+                                        values.grid.result().radiance)
     return rank_map, values
 
 
@@ -79,8 +84,11 @@ def fast_reconstruct(pattern: SamplePattern, trace: SparseTrace, params: MRTPara
     labels, sample_ranks = rank_ids(trace.ids(params.rule_for("fast")))
     background = 0 if labels[0] == 0 else -1  # ids are >= 0, so id 0 is rank 0
     grid_ranks = sample_ranks.reshape(pattern.grid_shape)
+    # the grid smoothed within its noise, and its values, beside the ids
+    smoothing = (partial(smoothed_radiance, pattern, trace, params, "fast")
+                 if smooths(trace, params, "fast") else None)
     values = TracedGridValues.start(pattern, trace.radiance, trace.albedo, sample_ranks,
-                                    background, trace.albedo_per_shape)  # beside the ids
+                                    background, trace.albedo_per_shape, smoothing)
     rank_map = pattern.nearest_image(grid_ranks)
     boxes = region_boxes(pattern, grid_ranks)  # one per id
     stats["regions"] = len(boxes)

@@ -26,6 +26,7 @@ the traced radiance exactly.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -579,11 +580,12 @@ class TracedGridValues:
     """Within-id interpolation of the traced grid, in two halves.
 
     :meth:`start` launches, on a worker thread, all that needs no final
-    pixel ids: the values to interpolate (:class:`EarlyGrid`, handed over as
-    soon as they are chosen), then :func:`early_radiance` on them, the
-    cubic's float64 radiance; a caller finds the ids meanwhile, and
-    :meth:`finish` takes them and fits the pixels near edges while the
-    cubic goes on.
+    pixel ids: the radiance to interpolate, where it is to be made first
+    (a mode's smoothing of the grid), the values to interpolate
+    (:class:`EarlyGrid`, handed over as soon as they are chosen), then
+    :func:`early_radiance` on them, the cubic's float64 radiance; a caller
+    finds the ids meanwhile, and :meth:`finish` takes them and fits the
+    pixels near edges while the cubic goes on.
     Radiance is interpolated directly when albedo is constant within every
     id; otherwise irradiance (radiance / albedo) and albedo are, with the
     same weights, and multiplied back.  A black background is filled, and
@@ -599,15 +601,21 @@ class TracedGridValues:
     @classmethod
     def start(cls, pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
               sample_ids: np.ndarray, background: int = 0,
-              albedo_constant: bool = False) -> "TracedGridValues":
+              albedo_constant: bool = False,
+              interpolated: np.ndarray | Callable[[], np.ndarray] | None = None
+              ) -> "TracedGridValues":
         """Launch the id-independent half; ``background`` is the id (or rank)
         of the background in ``sample_ids``, -1 if none; ``albedo_constant``
         says every id's albedo is one colour whatever the samples say (those
-        straddling two surfaces mix theirs)."""
+        straddling two surfaces mix theirs); ``interpolated``: the radiance
+        (n, 3) to interpolate where it is not ``radiance`` (the traced
+        pixels keep ``radiance``), or a function that makes it, called
+        first on the worker."""
         grid = Future()
         return cls(pattern, radiance, sample_ids.reshape(pattern.grid_shape), grid,
-                   beside(_values_and_early, pattern, radiance, albedo, sample_ids, background,
-                          albedo_constant, grid))
+                   beside(_values_and_early, pattern,
+                          radiance if interpolated is None else interpolated, albedo,
+                          sample_ids, background, albedo_constant, grid))
 
     def finish(self, id_map: np.ndarray) -> tuple[np.ndarray, Counter]:
         """Radiance (height, width, 3), float64, with every pixel's values from
@@ -631,21 +639,25 @@ class TracedGridValues:
 class EarlyGrid(NamedTuple):
     """What :class:`TracedGridValues` hands over before its cubic: the grid
     values to interpolate, the ids known constant (:func:`black_background`),
-    the shortcut counts and the stencil ids (:func:`stencil_ids_of`)."""
+    the shortcut counts, the stencil ids (:func:`stencil_ids_of`) and the
+    radiance interpolated (n, 3)."""
 
     grid: GridValues
     constant: dict
     counts: Counter
     stencil_ids: np.ndarray
+    radiance: np.ndarray
 
 
-def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.ndarray,
+def _values_and_early(pattern: SamplePattern, radiance, albedo: np.ndarray,
                       sample_ids: np.ndarray, background: int, albedo_constant: bool,
                       handed: Future) -> np.ndarray:
     """Set ``handed`` to the :class:`EarlyGrid` (the values to interpolate:
-    :class:`GridValues` of radiance, or of irradiance and albedo where the
-    albedo varies within an id), then return :func:`early_radiance` of them."""
+    :class:`GridValues` of ``radiance``, made first where it is a function,
+    or of irradiance and albedo where the albedo varies within an id), then
+    return :func:`early_radiance` of them."""
     try:
+        radiance = radiance() if callable(radiance) else radiance
         counts = Counter()
         constant = black_background(sample_ids, radiance, counts, background)
         if not albedo_constant:
@@ -660,7 +672,8 @@ def _values_and_early(pattern: SamplePattern, radiance: np.ndarray, albedo: np.n
         grid_ids = sample_ids.reshape(pattern.grid_shape)
         grid = GridValues.from_samples(pattern, grid_ids, values)
         counts["fireflies"] = grid.fireflies
-        handed.set_result(EarlyGrid(grid, constant, counts, stencil_ids_of(pattern, grid_ids)))
+        handed.set_result(EarlyGrid(grid, constant, counts, stencil_ids_of(pattern, grid_ids),
+                                    radiance))
     except BaseException as error:  # (the caller waits on it first)
         handed.set_exception(error)
         raise
