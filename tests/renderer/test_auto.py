@@ -221,8 +221,12 @@ def test_a_time_limit_the_id_pass_plan_fits_takes_it_and_traces_the_id_pass_once
     assert plan.reason == auto_limit.WITHIN_REASON.format(auto_plans.HOME_REASON)
     assert plan.time_limit == 60.0 and not plan.passes and plan.choice.error is None
     assert id_passes == [384 * 384]  # traced to be timed, then reused by the mode
-    # the same plan's image as without a limit (same seed), unchecked
-    assert np.array_equal(result.image, plain.image)
+    # the limit's time goes into the densest grid: the plan's image at that
+    # grid (same seed), unchecked
+    densest = auto_limit.DENSER_GRIDS[-1]
+    assert plan.choice.fraction == densest and result.pattern.count > 2 * plain.pattern.count
+    same = mitsuba_mrt.render(scene, mode="idpass", denoise="oidn", sample_fraction=densest)
+    assert np.array_equal(result.image, same.image)
 
 
 def test_a_time_limit_too_short_for_the_id_pass_plan_traces_no_id_pass(variant, monkeypatch):
