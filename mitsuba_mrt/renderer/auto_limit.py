@@ -3,7 +3,8 @@
 Before the passes (:mod:`.progressive`) fill a time limit, ``auto`` asks
 whether something else fits it better: an MRT plan a default render of the
 scene kept (:func:`measured_within`), :data:`~.auto_plans.HOME` where the
-grid probe says it ends in time (:func:`mrt_within`), or a preview, where
+grid probe says it ends in time (:func:`mrt_within`; on a denser grid where
+the limit leaves the time), or a preview, where
 one pass and OIDN on every pixel would overrun the limit
 (:func:`preview_first`, :func:`filled_preview`).  What the process's
 earlier renders took (their first round, their last OIDN call, the passes'
@@ -19,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import math
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -369,7 +371,9 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
     scene in this process what recording the grid's kernels adds.  A sampler
     that compiles kernels per spp (:func:`~.scene_query.sampler_bakes_spp`)
     is not planned so in such a process: its compilation cannot be told.
-    The plan's image is not checked (:func:`~.auto_plans.keeps`): the check's fallback,
+    Where the limit leaves time beyond the plan's, its grid is denser
+    (:func:`denser_grid`).  The plan's image is not checked
+    (:func:`~.auto_plans.keeps`): the check's fallback,
     the passes, would start after the limit.  Where the last replayed probe
     of ``key`` (:data:`_probe_execute`), or before any, the last probe an
     earlier process remembered (:func:`_recalled_probe`), says the plan
@@ -430,7 +434,8 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
     return AutoOutcome(plan, id_pass=traced.id_pass), traced, probed
 
 
-def denser_grid(fraction: float, spare: float, extra) -> float | None:
+def denser_grid(fraction: float, spare: float,
+                extra: Callable[[float], float]) -> float | None:
     """The grid :data:`HOME` takes under a time limit: the densest of
     :data:`DENSER_GRIDS` whose extra samples fit ``spare``, the seconds its
     plan at the default grid ``fraction`` is expected to leave of the limit,
