@@ -208,7 +208,8 @@ def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     traced, probed = Traced(), None
     if escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP:
         outcome = measured_within(kept_key, started, params.time_limit, notes,
-                                  sampler_bakes_spp(tracer.sensor.sampler()))
+                                  sampler_bakes_spp(tracer.sensor.sampler()),
+                                  pattern.width * pattern.height, params)
         if outcome is not None:
             return outcome, traced, None, False
         outcome, traced, probed = mrt_within(scene, pattern, tracer, params, started, notes,
@@ -341,20 +342,32 @@ def _keep(table: dict, key: tuple, value):
 
 
 def measured_within(key: tuple, started: float, limit: float, notes: list,
-                     bakes: bool) -> AutoOutcome | None:
+                     bakes: bool, pixels: int, params: MRTParams) -> AutoOutcome | None:
     """Under a time limit: the MRT plan of the default target that a render
     of ``key`` (:func:`~.auto.scene_key` and :func:`~.auto.plan_key`) in this process kept
     by its check, at the most spp expected to end within :data:`TIME_MARGIN`
     of the limit (:func:`~.kept_plans.plan_within`; ``bakes``: the sampler
-    compiles kernels per spp), unchecked; else None."""
+    compiles kernels per spp), unchecked, :data:`HOME`'s on a denser grid
+    where the limit leaves time beyond its own (:func:`denser_grid`: a
+    sampler that bakes its spp takes no spp it has not rendered); else None.
+    ``pixels``: the image's."""
     left = started + TIME_MARGIN * limit - time.perf_counter()
     kept = kept_plans.plan_within(key, left, bakes)
     if kept is None:
         return None
     choice, reason = kept
+    growing = kept_plans.growing_seconds(key, choice.spp)
+    kept_key = key
+    if choice.mode == HOME.mode and growing is not None:
+        fraction = choice.fraction or params.sample_fraction
+        extra = grid_extra(growing, fraction, pixels, params)
+        denser = denser_grid(fraction, left - choice.seconds, extra)
+        if denser is not None:  # (its time is not the kept plan's: not kept)
+            choice = replace(choice, fraction=denser, seconds=choice.seconds + extra(denser))
+            kept_key = None
     plan = Plan(choice, MEASURED_REASON.format(reason, choice.spp, choice.seconds),
                 time_limit=limit, notes=notes, pilot_s=time.perf_counter() - started)
-    return AutoOutcome(plan, kept_key=key)
+    return AutoOutcome(plan, kept_key=kept_key)
 
 
 def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
@@ -418,20 +431,29 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
     if time.perf_counter() + rest(probed.execute, host) > end:
         return None, traced, probed
     grid_s = GRID_OVER_PROBE * tracer.spp * probed.execute  # (the default grid's trace)
-    quality, pixels = preset(params.denoise_quality), pattern.count
-
-    def extra(fraction: float) -> float:  # (a denser grid's trace, and OIDN on it)
-        more = fraction / params.sample_fraction
-        return (grid_s * (more - 1.0) + expected_seconds(round(more * pixels), quality)
-                - expected_seconds(pixels, quality))
-
     fraction = denser_grid(params.sample_fraction,
-                           end - time.perf_counter() - rest(probed.execute, host), extra)
+                           end - time.perf_counter() - rest(probed.execute, host),
+                           grid_extra(grid_s, params.sample_fraction, width * height, params))
     plan = Plan(replace(chosen[0], spp=tracer.spp, fraction=fraction),
                 WITHIN_REASON.format(chosen[1]),
                 time_limit=params.time_limit, notes=notes,
                 pilot_s=time.perf_counter() - started - traced.id_pass.seconds)
     return AutoOutcome(plan, id_pass=traced.id_pass), traced, probed
+
+
+def grid_extra(grid_s: float, fraction: float, pixels: int,
+               params: MRTParams) -> Callable[[float], float]:
+    """For :func:`denser_grid`: what a grid of ``f`` of an image's ``pixels``
+    adds to the stages that grow with the grid, over a grid of ``fraction``
+    whose trace takes ``grid_s``: the trace's share, and OIDN's on the
+    grid (``params.denoise_quality``), each expected call on its own size."""
+    quality = preset(params.denoise_quality)
+    least = max(round(fraction * pixels), 1)
+
+    def extra(f: float) -> float:
+        return (grid_s * (f / fraction - 1.0) + expected_seconds(round(f * pixels), quality)
+                - expected_seconds(least, quality))
+    return extra
 
 
 def denser_grid(fraction: float, spare: float,

@@ -241,6 +241,17 @@ def plan_within(key: tuple, seconds: float, bakes: bool) -> tuple[Candidate, str
     return replace(choice, spp=spp, seconds=kept.expected(spp)), kept.reason
 
 
+def growing_seconds(key: tuple, spp: int) -> float | None:
+    """What the traces that grow with the spp (:data:`GROWING`: the grid's,
+    for ``idpass``) of the plan kept for ``key`` are expected to take of a
+    render at ``spp``: their share of the checked render's seconds; None
+    where no plan is kept or its share was not measured."""
+    kept = _plans.get(key)
+    if kept is None or not kept.growing or not kept.seconds:
+        return None
+    return typical(kept.growing) * kept.expected(spp)
+
+
 def clear() -> None:
     """Forget every kept plan."""
     _plans.clear()

@@ -19,6 +19,7 @@ from mitsuba_mrt.recon.denoise import release
 from mitsuba_mrt.renderer import auto, auto_limit, auto_plans, kept_plans, launch_cost, pilot
 from mitsuba_mrt.recon.sampling import grid_pattern
 from mitsuba_mrt.renderer.preview import PREVIEW_MAX_SPP
+from mitsuba_mrt.runtime.recent import typical
 from mitsuba_mrt.types import KernelCounts, Timings
 
 from helpers import SCENES
@@ -276,6 +277,7 @@ def test_a_time_limit_takes_the_checked_plan_again_at_the_most_spp_that_fit(vari
 
     def no_probe(*args):
         raise AssertionError("the plan was probed")
+    monkeypatch.setattr(auto_limit, "DENSER_GRIDS", ())  # (the spp alone: the grid below)
     with monkeypatch.context() as m:
         m.setattr(auto_limit, "_grid_probe", no_probe)
         m.setattr(kept_plans, "MOST_SPP_FACTOR", 1)  # (the checked spp the most)
@@ -305,6 +307,29 @@ def test_a_time_limit_takes_the_checked_plan_again_at_the_most_spp_that_fit(vari
     for kwargs in ({"sample_fraction": 0.2}, {"noise_threshold": 0.5}):
         other = mitsuba_mrt.render(scene, time_limit=60.0, **kwargs)
         assert not other.auto.reason.startswith(auto_plans.HOME_REASON + "; at")
+
+
+def test_a_time_limit_the_checked_plan_leaves_time_in_takes_it_on_a_denser_grid(variant,
+                                                                                monkeypatch):
+    scene = mi.load_string(scene_xml(384, spp=16).replace(AREA_LIGHT, POINT_LIGHT))
+    mitsuba_mrt.render(scene)  # the default target: its check keeps the plan
+    ((key, kept),) = kept_plans._plans.items()
+    monkeypatch.setattr(kept_plans, "MOST_SPP_FACTOR", 1)  # (no more spp: as a sampler
+    # that bakes them, which takes only those rendered before)
+    result = mitsuba_mrt.render(scene, time_limit=60.0)
+    densest = auto_limit.DENSER_GRIDS[-1]
+    assert result.mode_used == "idpass" and result.spp == 16
+    assert result.auto.choice.fraction == densest
+    assert result.auto.reason.startswith(auto_plans.HOME_REASON + "; at 16 spp")
+    assert result.auto.choice.seconds > typical(kept.seconds[16])  # (the denser grid's)
+    # the plan's image on that grid (same seed), unchecked; its time is not the plan's
+    same = mitsuba_mrt.render(scene, mode="idpass", denoise="oidn", sample_fraction=densest)
+    assert np.array_equal(result.image, same.image) and len(kept.seconds[16]) == 1
+    # a limit the plan nearly fills: its own grid, its time kept
+    kept.seconds = {16: [0.93 * 60.0 - 0.5]}
+    result = mitsuba_mrt.render(scene, time_limit=60.0)
+    assert result.mode_used == "idpass" and result.auto.choice.fraction is None
+    assert len(kept.seconds[16]) == 2
 
 
 def test_a_kept_plan_s_first_render_that_compiled_does_not_shrink_its_expected_time():
