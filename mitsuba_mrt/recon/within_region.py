@@ -649,7 +649,8 @@ class EarlyGrid(NamedTuple):
     radiance: np.ndarray
 
 
-def _values_and_early(pattern: SamplePattern, radiance, albedo: np.ndarray,
+def _values_and_early(pattern: SamplePattern,
+                      radiance: np.ndarray | Callable[[], np.ndarray], albedo: np.ndarray,
                       sample_ids: np.ndarray, background: int, albedo_constant: bool,
                       handed: Future) -> np.ndarray:
     """Set ``handed`` to the :class:`EarlyGrid` (the values to interpolate:
