@@ -5,8 +5,8 @@
 
 A time-limited render in a fresh process plans its first OIDN call from a
 prior (:func:`mitsuba_mrt.recon.denoise.prior_seconds`), which is meant to
-be no faster than the call will be.  Per image size (a side, square) and
-preset, ``--rounds`` fresh processes each time a first call of
+be no faster than the call will be on the machine it was measured on.  Per
+image size (a side, square) and preset, ``--rounds`` fresh processes each time a first call of
 :func:`~mitsuba_mrt.recon.denoise.denoise_image` (both guides) and four
 more; printed: the prior, the first calls (median and longest), the warm
 call, the longest first call over the prior, and the warm call's seconds

@@ -129,17 +129,16 @@ def denoise_seconds(pixels: int, quality: str) -> float | None:
 
 #: Seconds a call of :func:`denoise_image` takes per pixel and worker thread,
 #: with both guides, before any call in the process has measured it: a warm
-#: call's on the slower of the two 2-core x86 VMs of docs/BENCHMARKS.md (AMD
-#: EPYC, AVX2; 64-512 px a side; the Intel Xeon takes about half); and the
-#: part of a process's first call that does not grow with the pixels (its
-#: device, the filter's weights), which makes a small image's first call 2-4
-#: times a warm one and a large image's 1.2-1.5 times.  With
-#: :data:`FIRST_CALL_SHARE` on both, a first call on that VM takes 0.7-1.2
-#: of what they say, most often below 1 (fresh processes, 64-512 px;
-#: ``examples/first_calls.py``), so that a first time-limited render plans
-#: for a call no faster than it will be.
-PRIOR_SECONDS = {"fast": 2.4e-6, "balanced": 3.9e-6, "high": 3.9e-6}
-PRIOR_FIXED = {"fast": 0.01, "balanced": 0.015, "high": 0.015}
+#: call's on a 2-core x86 CPU (32-512 px a side); and the part of a process's
+#: first call that does not grow with the pixels (OIDN's import, its device,
+#: the filter's weights), which makes a small image's first call 2-5 times a
+#: warm one and a large image's 1.2-1.35 times.  With
+#: :data:`FIRST_CALL_SHARE` on both, a first call takes 0.48-0.89 of what
+#: they say on the Intel VM of docs/BENCHMARKS.md (fresh processes, 32-512
+#: px), so that a first time-limited render plans for a call no faster than
+#: it will be; on the slower AMD one 1.5-2.5 (``examples/first_calls.py``).
+PRIOR_SECONDS = {"fast": 0.95e-6, "balanced": 1.8e-6, "high": 1.8e-6}
+PRIOR_FIXED = {"fast": 0.006, "balanced": 0.01, "high": 0.01}
 #: The first call on an image size at a preset takes this share longer than
 #: the next ones (OIDN makes that filter's buffers as it runs): 0.25-0.35 on
 #: 2 cores at 256-512 px.

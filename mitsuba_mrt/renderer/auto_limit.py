@@ -87,10 +87,10 @@ PROBED_SLACK = 1.0
 #: without the grid probe where the limit is at least this many times
 #: OIDN's first-call prior for the image
 #: (:func:`~mitsuba_mrt.recon.denoise.prior_seconds`): a fresh process's
-#: first 1-spp pass over every pixel took 0.33-1.61 times the ``fast``
-#: prior on the gallery at 256 and 512 px (``examples/first_calls.py
-#: --passes 256 512``; its kernels' recording, as the probe's, is most of
-#: it at 256 px), so that a pass and the call end within the
+#: first 1-spp pass over every pixel took 0.46-2.54 times that prior on the
+#: gallery at 256 and 512 px on the Intel VM (``examples/first_calls.py
+#: --passes 256 512``; its kernels' recording, as the probe's, is
+#: most of it at 256 px), so that a pass and the call end within the
 #: passes' share of the limit (:data:`TIME_MARGIN`), and the probe, as long
 #: again, would only take time from the passes.
 UNPROBED_OVER_OIDN = 4.0
