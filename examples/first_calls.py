@@ -6,9 +6,9 @@
 A time-limited render in a fresh process plans its first OIDN call from a
 prior (:func:`mitsuba_mrt.recon.denoise.prior_seconds`), which is meant to
 be no faster than the call will be on the machine it was measured on.  Per
-image size (a side, square) and preset, ``--rounds`` fresh processes each time a first call of
-:func:`~mitsuba_mrt.recon.denoise.denoise_image` (both guides) and four
-more; printed: the prior, the first calls (median and longest), the warm
+image size (a side, square) and preset, ``--rounds`` fresh processes each
+time a first call of :func:`~mitsuba_mrt.recon.denoise.denoise_image` (both
+guides) and four more; printed: the prior, the first calls (median and longest), the warm
 call, the longest first call over the prior, and the warm call's seconds
 per pixel and worker thread (what ``PRIOR_SECONDS`` holds).
 
@@ -96,9 +96,10 @@ def oidn_calls(sizes: list, rounds: int) -> None:
             runs = [_child(OIDN_CHILD, str(n), quality) for _ in range(rounds)]
             prior, longest = runs[0]["prior"], max(r["first"] for r in runs)
             warm = statistics.median(r["warm"] for r in runs)
+            per_pixel = warm * runs[0]["threads"] / (n * n) * 1e6
             print(f"{n:4d} {quality:9s} {prior:8.3f} "
                   f"{statistics.median(r['first'] for r in runs):8.3f} {longest:8.3f} "
-                  f"{warm:8.3f} {longest / prior:13.2f} {warm * runs[0]['threads'] / (n * n) * 1e6:17.2f}")
+                  f"{warm:8.3f} {longest / prior:13.2f} {per_pixel:17.2f}")
 
 
 def first_passes(sizes: list) -> None:
