@@ -21,12 +21,10 @@ processes is off in every child.
 """
 
 import argparse
-import json
-import os
 import statistics
-import subprocess
-import sys
 from pathlib import Path
+
+from fresh_child import fresh_child
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -80,20 +78,12 @@ print(json.dumps({"first": time.perf_counter() - start,
 """
 
 
-def _child(program: str, *args: str) -> dict:
-    env = dict(os.environ, MITSUBA_MRT_MEMORY="off")
-    env.pop("PYTHONDONTWRITEBYTECODE", None)  # (modules' bytecode kept, as a user's)
-    out = subprocess.run([sys.executable, "-c", program, *args], env=env, cwd=ROOT,
-                         capture_output=True, text=True, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
-
-
 def oidn_calls(sizes: list, rounds: int) -> None:
     print(f"{'px':>4s} {'preset':9s} {'prior s':>8s} {'first s':>8s} {'longest':>8s} "
           f"{'warm s':>8s} {'longest/prior':>13s} {'warm us/px/thread':>17s}")
     for n in sizes:
         for quality in ("fast", "balanced", "high"):
-            runs = [_child(OIDN_CHILD, str(n), quality) for _ in range(rounds)]
+            runs = [fresh_child(OIDN_CHILD, str(n), quality, what=f"OIDN at {n} px, {quality}") for _ in range(rounds)]
             prior, longest = runs[0]["prior"], max(r["first"] for r in runs)
             warm = statistics.median(r["warm"] for r in runs)
             per_pixel = warm * runs[0]["threads"] / (n * n) * 1e6
@@ -108,7 +98,8 @@ def first_passes(sizes: list) -> None:
     for res in sizes:
         ratios = []
         for name in GALLERY_SCENES:
-            run = _child(PASS_CHILD, name, str(res))
+            run = fresh_child(PASS_CHILD, name, str(res), what=f"{name}'s first pass",
+                              cwd=ROOT)
             ratios.append(run["first"] / run["prior"])
             print(f"{name:16s} {res:4d} px: first pass {run['first']:.3f} s, "
                   f"{ratios[-1]:.2f} x the prior")

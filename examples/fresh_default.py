@@ -32,13 +32,12 @@ import csv
 import json
 import os
 import statistics
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from fresh_child import fresh_child
 from gallery_scenes import add_truths
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,15 +75,10 @@ print(json.dumps({"seconds": seconds, "used": used, "chose": chose}))
 def _child(path: Path, method: str, defines: dict, folder: str,
            memory: str = "off") -> tuple[dict, np.ndarray]:
     """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``)."""
-    env = dict(os.environ, MITSUBA_MRT_MEMORY=memory)
-    env.pop("PYTHONDONTWRITEBYTECODE", None)  # (as a user's Python: bytecode kept)
     image_path = os.path.join(folder, "image.npy")
-    out = subprocess.run([sys.executable, "-c", CHILD, str(path), method, json.dumps(defines),
-                          image_path], env=env, capture_output=True, text=True)
-    if out.returncode != 0:
-        lines = out.stderr.strip().splitlines() or [f"exit status {out.returncode}"]
-        sys.exit(f"error: {method} render of {path.name} failed: {lines[-1]}")
-    return json.loads(out.stdout.strip().splitlines()[-1]), np.load(image_path)
+    report = fresh_child(CHILD, str(path), method, json.dumps(defines), image_path,
+                         what=f"{method} render of {path.name}", memory=memory)
+    return report, np.load(image_path)
 
 
 def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> list:

@@ -24,14 +24,12 @@ With ``--cold-cache`` every process gets an empty Dr.Jit kernel cache (its own
 import argparse
 import csv
 import json
-import os
 import statistics
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 
 from mitsuba_mrt.renderer.variants import VARIANT_CHOICES
+
+from fresh_child import fresh_child
 
 #: The child's program: one render, its figures as one JSON line.
 CHILD = """
@@ -55,20 +53,8 @@ else:
 
 
 def _child(scene: str, mode: str, defines: dict, cold: bool, variant: str) -> dict:
-    env = dict(os.environ)
-    # as a user's Python: the package's modules compiled once, their bytecode
-    # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
-    env.pop("PYTHONDONTWRITEBYTECODE", None)
-    with tempfile.TemporaryDirectory() as home:
-        if cold:
-            env["HOME"] = home
-        argv = [sys.executable, "-c", CHILD, scene, mode, json.dumps(defines), variant]
-        out = subprocess.run(argv, env=env, capture_output=True, text=True)
-    if out.returncode != 0:  # (the child's last line: its error)
-        lines = out.stderr.strip().splitlines() or [f"exit status {out.returncode}"]
-        print(f"error: {mode} render of {scene} failed: {lines[-1]}", file=sys.stderr)
-        sys.exit(2)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return fresh_child(CHILD, scene, mode, json.dumps(defines), variant,
+                       what=f"{mode} render of {scene}", memory=None, cold=cold)
 
 
 def measure(scene: str, modes: list, defines: dict, rounds: int, cold: bool,

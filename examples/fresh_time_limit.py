@@ -30,16 +30,14 @@ scene, each rung in a fresh process too: printed besides, the image's error
 """
 
 import argparse
-import json
 import os
 import statistics
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from fresh_child import fresh_child
 from gallery_scenes import add_truths
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,16 +70,8 @@ else:
 def _child(path: Path, limit: str, res: int, cold: bool = False, image: str = "-",
            memory: str = "off") -> dict:
     """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``)."""
-    env = dict(os.environ, MITSUBA_MRT_MEMORY=memory)
-    # as a user's Python: the package's modules compiled once, their bytecode
-    # kept (a shell with PYTHONDONTWRITEBYTECODE compiles them in every process)
-    env.pop("PYTHONDONTWRITEBYTECODE", None)
-    with tempfile.TemporaryDirectory() as home:
-        if cold:  # (Dr.Jit keeps its kernel cache under HOME)
-            env["HOME"] = home
-        out = subprocess.run([sys.executable, "-c", CHILD, str(path), limit, str(res), image],
-                             env=env, capture_output=True, text=True, check=True)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    return fresh_child(CHILD, str(path), limit, str(res), image,
+                       what=f"{path.name} under limit {limit}", memory=memory, cold=cold)
 
 
 def main():
