@@ -40,13 +40,22 @@ from .auto_plans import (EDGE_TESTED, HOME, HOME_MIN_SPP, AutoOutcome, Traced, e
 from .preview import preview_grid
 from .launch_cost import LaunchCost
 from .replay import recordings
-from .scene_query import description_key, sampler_bakes_spp, textured_diffuse_shapes
+from .scene_query import (description_key, sample_count_at_most, sampler_bakes_spp,
+                          textured_diffuse_shapes)
 
 #: The share of a time limit the passes may plan to fill (the final OIDN
 #: call's time is planned within it; the rest is for the machine's noise and
 #: a fresh process's first uses: at 0.97 first renders took up to 1.16 times
 #: a quarter of a full render).
 TIME_MARGIN = 0.93
+
+#: Where the sampler bakes its spp into the kernels, the spp (as the sampler
+#: takes them) a time-limited render's launches may have besides those
+#: launched before (:func:`launch_ladder`): the squares to 64, which
+#: ``stratified`` and ``multijitter`` take.  Where only the spp launched
+#: before were taken, a scene's first time-limited render filled its time
+#: with launches of 1 spp, each a stratum of its own.
+LADDER = tuple(k * k for k in range(2, 9))
 
 #: The plan where one pass and OIDN on the whole image would overrun a time
 #: limit: the MRT's cheapest image, a tenth of the pixels' samples (its
@@ -238,7 +247,15 @@ def kept_cost(key: tuple, tracer) -> LaunchCost:
         cost = LaunchCost.from_memory(recalled, bakes) or LaunchCost(spp_compiles=bakes)
     cost = _keep(_launch_costs, key, cost)
     cost.replays = frozenset(spp for spp in (1, 2) if tracer.pass_recorded(spp))
+    cost.ladder = launch_ladder(tracer.sensor.sampler()) if cost.spp_compiles else frozenset()
     return cost
+
+
+def launch_ladder(sampler) -> frozenset:
+    """The spp a time-limited render's launches may have, besides those
+    launched before, where ``sampler`` bakes its spp into the kernels: each
+    of :data:`LADDER` as the sampler takes it (:func:`.scene_query.sample_count_at_most`)."""
+    return frozenset(sample_count_at_most(sampler, spp) for spp in LADDER)
 
 
 def remember_launches(key: tuple, tracer) -> None:

@@ -132,11 +132,14 @@ class LaunchCost:
     >>> round(cost(9), 2), cost.first(0.5)
     (0.47, 9)
 
-    Where a new spp compiles, only the spp launched before are planned:
+    Where a new spp compiles, only the spp launched before, and the
+    :attr:`ladder`'s, are planned:
 
     >>> cost = LaunchCost([(1, 0.02, False), (4, 0.05, False)], spp_compiles=True)
-    >>> cost.fits(0.1), cost.cheapest(), cost(2)
+    >>> cost.fits(0.12), cost.cheapest(), cost(2)
     (4, 1, inf)
+    >>> cost.ladder = frozenset([4, 9, 16]); cost.fits(0.12)
+    9
 
     Launches an earlier process made (:meth:`from_memory`) tell the line, and
     every class records anew, at what that process's first launch took
@@ -160,6 +163,10 @@ class LaunchCost:
     #: a first launch (the grid probe's, :func:`.auto_limit.preview_first`);
     #: None: a first launch is the cheapest.
     prior: tuple | None = None
+    #: Where a new spp compiles: the spp a launch may have besides those
+    #: launched before (:func:`~.auto_limit.launch_ladder`), whose kernels a
+    #: scene's earlier time-limited renders left in Dr.Jit's disk cache.
+    ladder: frozenset = frozenset()
 
     def __post_init__(self):
         self.launches = [Launch(*launch) for launch in self.launches]
@@ -300,12 +307,17 @@ class LaunchCost:
     def _unplanned(self, spp: int) -> bool:
         """Whether ``spp`` is not planned: where a new spp compiles
         (``spp_compiles``) and some spp has been launched, one that no launch,
-        of this process or an earlier one, nor :attr:`replays` had, other
-        than a process's first launch of 1 spp (the launch that measures
-        the line where nothing else is known).  Whether its kernels come
-        from Dr.Jit's disk cache or compile (several seconds for some scenes)
-        no recording tells; an earlier process's launch put them there."""
-        if not (self.spp_compiles and self.launches) or (spp == 1 and not self.launched_here):
+        of this process or an earlier one, nor :attr:`replays` had, nor
+        :attr:`ladder` holds, other than a process's first launch of 1 spp
+        (the launch that measures the line where nothing else is known).
+        Whether its kernels come from Dr.Jit's disk cache or compile
+        (several seconds for some scenes) no recording tells; an earlier
+        process's launch put them there, or for the ladder's few counts a
+        scene's earlier time-limited renders (a new spp's cost,
+        :attr:`record_s`, holds what this process's last recorded launch
+        spent compiling, where it compiled)."""
+        if (not (self.spp_compiles and self.launches) or (spp == 1 and not self.launched_here)
+                or spp in self.ladder):
             return False
         return self._new(spp, anywhere=True)
 
@@ -344,9 +356,9 @@ class LaunchCost:
         ``seconds``: the most that :meth:`fits` them (the line through
         earlier renders' launches, with no :data:`ROUND_SAFETY`, or before
         any, the :attr:`prior`), else the cheapest.  Where a new spp
-        compiles, only spp launched before fit (a stratifying sampler's one
-        launch of more spp beats several of fewer, each a stratum of its
-        own; the rest of the time is filled after it).  Before any launch
+        compiles, only spp launched before and the :attr:`ladder`'s fit (a
+        stratifying sampler's one launch of more spp beats several of fewer,
+        each a stratum of its own; the rest of the time is filled after it).  Before any launch
         and without a prior, where a new spp compiles nothing:
         :data:`UNMEASURED_FIRST` (the launch that measures the line, of the
         recording class of every larger launch).
@@ -365,13 +377,14 @@ class LaunchCost:
 
     def fits(self, seconds: float) -> int:
         """The most spp a launch expected to take at most ``seconds`` may
-        have (only those launched before or in :attr:`replays` where a new
-        spp compiles)."""
+        have (only those launched before or in :attr:`replays` or
+        :attr:`ladder` where a new spp compiles)."""
         fixed, per_spp = self._line()
         if per_spp <= 0:
             return 0
+        # (an earlier process's with its recording)
         launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
-                    if self(spp) <= seconds]  # (an earlier process's with its recording)
+                    | self.ladder if self(spp) <= seconds]
         if self.spp_compiles and self.launches:
             return max(launched + [0])
         def most(spent: float) -> int:  # (a fit's rounding is not a launch short)

@@ -10,7 +10,8 @@ left of it), or the spp reach the cap; then the mean of the passes goes
 through OIDN once (with ``quality="auto"`` at the preset
 :func:`final_quality` picks).  A round is one launch, its odd and even samples its
 two halves (under a time limit, a sampler that compiles kernels per spp
-launches the spp whose kernels it has, as far as it can).  Blender Cycles'
+launches the spp whose kernels it has and a few squares,
+:data:`~.auto_limit.LADDER`).  Blender Cycles'
 time limit and noise threshold work the same way.
 
 The error needs no reference: after a round of ``k`` passes, the mean of
@@ -600,10 +601,11 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
     Without ``denoise`` the image is the passes' mean.  Under a deadline, a
     sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
-    launches the spp launched before where they fit, as the default rounds
-    launched them (a launch in one half, the guides throughout).  ``surfaces`` (each
-    pixel's shape index, and per shape index whether it is a textured
-    diffuse surface: :func:`~.scene_query.textured_diffuse_shapes`) lets
+    launches the spp launched before and ``cost``'s ladder where they fit, as
+    the default rounds launched them (a launch in one half, the guides
+    throughout).  ``surfaces`` (each pixel's shape index, and per shape
+    index whether it is a textured diffuse surface:
+    :func:`~.scene_query.textured_diffuse_shapes`) lets
     the last OIDN call denoise the textured pixels as their shading
     (:attr:`Passes.shading`).  ``cost`` holds the launches of earlier
     renders of the same objects and image size (a launch of an spp among

@@ -1266,6 +1266,39 @@ def test_what_a_round_cannot_fill_of_a_time_limit_smaller_launches_do(timed_trac
         assert passes.half_counts == [6, 6]
 
 
+@pytest.mark.parametrize("ladder", [(), (4, 9, 16)], ids=["launched before", "ladder"])
+def test_a_sampler_that_bakes_spp_fills_a_time_limit_with_the_ladder_s_counts_too(
+        timed_tracer, ladder):
+    from mitsuba_mrt.renderer import progressive
+
+    Tracer, launched, clock = timed_tracer
+    xy = np.zeros((4, 2), dtype=np.int64)
+    passes, progress = progressive.Passes(np.arange(4)), progressive.Progress()
+    passes.add(Tracer(1)(xy), 0, True)
+    cost = launch_cost.LaunchCost([(1, 2.0, False), (4, 5.0, False)], spp_compiles=True,
+                                  ladder=frozenset(ladder))  # the line 1 + spp
+    assert cost(9) == (10.0 if ladder else math.inf)
+    start = clock[0]
+    progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
+                      max_spp=64, launch=1, halves=False)
+    # 13 s left, a launch at most 1 / 1.15 of what is left: only the spp launched before
+    # (a new one might compile), 4, 4 and 1; with the ladder one launch of 9 spp
+    # (its strata whole), then 1
+    assert launched[1:] == ([9, 1] if ladder else [4, 4, 1]) and clock[0] <= start + 13.0
+
+
+def launched_ladder_of(kind: str) -> frozenset:
+    from mitsuba_mrt.renderer.auto_limit import launch_ladder
+
+    return launch_ladder(mi.load_dict({"type": kind, "sample_count": 16}))
+
+
+def test_the_ladder_is_the_squares_to_64_as_the_sampler_takes_them():
+    assert launched_ladder_of("stratified") == {4, 9, 16, 25, 36, 49, 64}
+    assert launched_ladder_of("multijitter") == {4, 9, 16, 25, 36, 49, 64}
+    assert all(spp <= 64 for spp in launched_ladder_of("ldsampler"))
+
+
 def test_a_time_limit_alone_fills_its_time_after_one_launch(timed_tracer):
     from mitsuba_mrt.renderer import progressive
 
