@@ -164,8 +164,9 @@ class LaunchCost:
     #: None: a first launch is the cheapest.
     prior: tuple | None = None
     #: Where a new spp compiles: the spp a launch may have besides those
-    #: launched before (:func:`~.auto_limit.launch_ladder`), whose kernels a
-    #: scene's earlier time-limited renders left in Dr.Jit's disk cache.
+    #: launched before (:func:`~.auto_limit.launch_ladder`), few, so that
+    #: Dr.Jit's disk cache holds their kernels once a scene's earlier
+    #: time-limited renders have launched them (a first launch compiles them).
     ladder: frozenset = frozenset()
 
     def __post_init__(self):
@@ -358,8 +359,8 @@ class LaunchCost:
         any, the :attr:`prior`), else the cheapest.  Where a new spp
         compiles, only spp launched before and the :attr:`ladder`'s fit (a
         stratifying sampler's one launch of more spp beats several of fewer,
-        each a stratum of its own; the rest of the time is filled after it).  Before any launch
-        and without a prior, where a new spp compiles nothing:
+        each a stratum of its own; the rest of the time is filled after it).
+        Before any launch and without a prior, where a new spp compiles nothing:
         :data:`UNMEASURED_FIRST` (the launch that measures the line, of the
         recording class of every larger launch).
 
