@@ -1293,10 +1293,19 @@ def launched_ladder_of(kind: str) -> frozenset:
     return launch_ladder(mi.load_dict({"type": kind, "sample_count": 16}))
 
 
-def test_the_ladder_is_the_squares_to_64_as_the_sampler_takes_them():
+def test_the_ladder_is_the_squares_to_64_as_the_sampler_takes_them(monkeypatch):
     assert launched_ladder_of("stratified") == {4, 9, 16, 25, 36, 49, 64}
     assert launched_ladder_of("multijitter") == {4, 9, 16, 25, 36, 49, 64}
     assert all(spp <= 64 for spp in launched_ladder_of("ldsampler"))
+    # a scene's kept launches plan it where its sampler bakes its spp, and only there
+    monkeypatch.setattr(auto_limit, "_launch_costs", {})
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")
+    for kind, ladder in (("stratified", launched_ladder_of("stratified")),
+                         ("independent", frozenset())):
+        sampler = mi.load_dict({"type": kind})
+        tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: sampler),
+                                 pass_recorded=lambda spp: False)
+        assert auto_limit.kept_cost((kind, "sensor", "integrator", 16), tracer).ladder == ladder
 
 
 def test_a_time_limit_alone_fills_its_time_after_one_launch(timed_tracer):
