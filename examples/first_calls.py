@@ -83,7 +83,8 @@ def oidn_calls(sizes: list, rounds: int) -> None:
           f"{'warm s':>8s} {'longest/prior':>13s} {'warm us/px/thread':>17s}")
     for n in sizes:
         for quality in ("fast", "balanced", "high"):
-            runs = [fresh_child(OIDN_CHILD, str(n), quality, what=f"OIDN at {n} px, {quality}") for _ in range(rounds)]
+            runs = [fresh_child(OIDN_CHILD, str(n), quality, what=f"OIDN at {n} px, {quality}",
+                                cwd=ROOT) for _ in range(rounds)]
             prior, longest = runs[0]["prior"], max(r["first"] for r in runs)
             warm = statistics.median(r["warm"] for r in runs)
             per_pixel = warm * runs[0]["threads"] / (n * n) * 1e6

@@ -239,15 +239,17 @@ def kept_cost(key: tuple, tracer) -> LaunchCost:
     process remembered, :func:`remember_launches`, else none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
     launches of 1 and 2 spp among its :attr:`~.launch_cost.LaunchCost.replays`
-    where another trace recorded their layout (a full render denoised)."""
+    where another trace recorded their layout (a full render denoised), and
+    where the sampler bakes its spp, :func:`launch_ladder`'s."""
     cost = _launch_costs.get(key)
     if cost is None:
-        bakes = sampler_bakes_spp(tracer.sensor.sampler())
+        sampler = tracer.sensor.sampler()
+        bakes = sampler_bakes_spp(sampler)
         recalled = memory.recall(_memory_key(key, tracer)) if memory.enabled() else None
         cost = LaunchCost.from_memory(recalled, bakes) or LaunchCost(spp_compiles=bakes)
+        cost.ladder = launch_ladder(sampler) if bakes else frozenset()
     cost = _keep(_launch_costs, key, cost)
     cost.replays = frozenset(spp for spp in (1, 2) if tracer.pass_recorded(spp))
-    cost.ladder = launch_ladder(tracer.sensor.sampler()) if cost.spp_compiles else frozenset()
     return cost
 
 

@@ -383,7 +383,8 @@ class LaunchCost:
         fixed, per_spp = self._line()
         if per_spp <= 0:
             return 0
-        # (an earlier process's with its recording)
+        # (each at its expected seconds: an earlier process's, or the ladder's
+        # never launched, with their recording)
         launched = [spp for spp in {launch.spp for launch in self.launches} | self.replays
                     | self.ladder if self(spp) <= seconds]
         if self.spp_compiles and self.launches:
