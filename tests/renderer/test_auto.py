@@ -1277,7 +1277,8 @@ def test_a_sampler_that_bakes_spp_fills_a_time_limit_with_the_ladder_s_counts_to
     passes.add(Tracer(1)(xy), 0, True)
     cost = launch_cost.LaunchCost([(1, 2.0, False), (4, 5.0, False)], spp_compiles=True,
                                   ladder=frozenset(ladder))  # the line 1 + spp
-    assert cost(9) == (10.0 if ladder else math.inf)
+    # the line is a least-squares fit: exact up to rounding, which the BLAS varies
+    assert cost(9) == (pytest.approx(10.0) if ladder else math.inf)
     start = clock[0]
     progressive._fill(passes, progress, Tracer(), xy, until=start + 13.0, cost=cost,
                       max_spp=64, launch=1, halves=False)
