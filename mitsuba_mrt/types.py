@@ -55,9 +55,11 @@ class MRTParams:
     denoise_quality : {'auto', 'fast', 'balanced', 'high'}
         OIDN's quality preset for ``denoise="oidn"``: ``balanced`` and
         ``high`` run a larger network than ``fast``, slower and usually more
-        accurate (docs/BENCHMARKS.md, Denoising).  ``auto``: ``fast``, but
-        for the last call of ``auto``'s passes, which takes ``high`` where
-        its extra time buys more than more passes would.
+        accurate (docs/BENCHMARKS.md, Denoising).  ``auto``: ``high`` on the
+        traced grid (a small image; ``fast`` on a time-limited preview's),
+        ``fast`` on a whole image, but for the last call of ``auto``'s
+        passes, which takes ``high`` where its extra time buys more than
+        more passes would.
     noise_smoothing : float
         In ``fast``, ``refine`` and ``idpass``, average each traced grid
         value with the neighbours of its id that agree with it within this

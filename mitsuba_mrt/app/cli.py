@@ -69,8 +69,9 @@ def _add_mrt_options(parser: argparse.ArgumentParser) -> None:
                         "whole image after); oidn: Intel Open Image Denoise "
                         "(pip install mitsuba-mrt[denoise]) (none)")
     g.add_argument("--denoise-quality", choices=DENOISE_QUALITIES, default=None,
-                   help="OIDN's quality preset with --denoise oidn; auto: fast, but auto's "
-                        "passes end with high where it pays (auto)")
+                   help="OIDN's quality preset with --denoise oidn; auto: high on the grid, "
+                        "fast on whole images, but auto's passes end with high where "
+                        "it pays (auto)")
 
 
 def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) -> None:

@@ -37,8 +37,9 @@ QUALITIES = ("fast", "balanced", "high")
 
 
 def preset(quality: str) -> str:
-    """OIDN's preset for a ``denoise_quality`` setting: ``auto`` is ``fast``
-    (``auto``'s passes choose their last call's preset themselves).
+    """OIDN's preset for a ``denoise_quality`` setting on a whole image:
+    ``auto`` is ``fast`` (``auto``'s passes choose their last call's preset
+    themselves; the MRT's grid takes :func:`grid_preset`'s).
 
     Examples
     --------
@@ -48,10 +49,25 @@ def preset(quality: str) -> str:
     return "fast" if quality == "auto" else quality
 
 
-#: The quality :func:`denoise_grid` uses: on a 2-core CPU ``fast`` takes 0.5 to
-#: 0.85 of ``balanced``'s time on the grid of a 400 x 400 image, for an MRT error
-#: about 5 % higher; at few spp time buys more (docs/BENCHMARKS.md, Denoising).
-GRID_QUALITY = "fast"
+#: The preset the MRT's grid is denoised at where ``denoise_quality`` is
+#: ``auto`` (:func:`grid_preset`), and :func:`denoise_grid`'s default: the grid
+#: holds a tenth to a third of the pixels, so that ``high``'s call is a small
+#: share of an MRT render's time, and the error it leaves is lower than
+#: ``fast``'s on every scene of ``bench rival`` (docs/BENCHMARKS.md).
+GRID_QUALITY = "high"
+
+
+def grid_preset(quality: str) -> str:
+    """OIDN's preset for the MRT's grid at a ``denoise_quality`` setting:
+    ``auto`` is :data:`GRID_QUALITY` (whole images, :func:`preset`, take
+    ``fast``).
+
+    Examples
+    --------
+    >>> grid_preset("auto"), grid_preset("fast")
+    ('high', 'fast')
+    """
+    return GRID_QUALITY if quality == "auto" else quality
 
 #: Committed filters kept (a render alternates a few image sizes: the grid,
 #: ``auto``'s estimate rows and the whole image; a new size costs a commit).

@@ -262,9 +262,12 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     if choice.fraction is not None:  # (the plan chose its grid)
         pattern = grid_pattern(width, height, choice.fraction)
     planned = replace(tracer, spp=choice.spp, id_pass=outcome.id_pass)
+    run = params.with_(denoise="oidn" if choice.denoise else "none")
+    if outcome.preview_key is not None:  # (at the preset its time was planned at)
+        run = auto_limit.preview_params(run)
     begin = time.perf_counter()
-    result = _mrt(pattern, planned, params.with_(denoise="oidn" if choice.denoise else "none"),
-                  choice.mode, plan, start, progress or _quiet, outcome.grid)
+    result = _mrt(pattern, planned, run, choice.mode, plan, start, progress or _quiet,
+                  outcome.grid)
     if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
         return _checked(result, scene, pattern, tracer, params, start, recorded, progress)
     if outcome.preview_key is not None and choice.mode == "fast":

@@ -27,7 +27,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..modes.plan import Candidate, Plan
-from ..recon.denoise import denoise_seconds, expected_seconds, preset, prior_seconds
+from ..recon.denoise import (denoise_seconds, expected_seconds, grid_preset, preset,
+                             prior_seconds)
 from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern
 from ..runtime import memory
@@ -63,6 +64,11 @@ LADDER = tuple(k * k for k in range(2, 9))
 #: reconstructed.
 PREVIEW = Candidate("fast+oidn", "mrt", 1, mode="fast", denoise=True)
 PREVIEW_REASON = "a preview: one pass and OIDN on every pixel would overrun the time limit"
+#: OIDN's preset for a preview's grid where ``denoise_quality`` is ``auto``
+#: (:func:`preview_params`): the one its time is planned at
+#: (:func:`_preview_after`), not the MRT's usual grid preset, which costs
+#: more and a preview has the least time.
+PREVIEW_QUALITY = "fast"
 #: The preview where OIDN's call, even right after the grid's first launch,
 #: would end past :data:`PREVIEW_SLACK` times the limit: its grid as traced.
 UNDENOISED = Candidate("fast", "mrt", 1, mode="fast", denoise=False)
@@ -466,8 +472,9 @@ def grid_extra(grid_s: float, fraction: float, pixels: int,
     """For :func:`denser_grid`: what a grid of ``f`` of an image's ``pixels``
     adds to the stages that grow with the grid, over a grid of ``fraction``
     whose trace takes ``grid_s``: the trace's share, and OIDN's on the
-    grid (``params.denoise_quality``), each expected call on its own size."""
-    quality = preset(params.denoise_quality)
+    grid (at ``params.denoise_quality``'s grid preset), each expected call on
+    its own size."""
+    quality = grid_preset(params.denoise_quality)
     least = max(round(fraction * pixels), 1)
 
     def extra(f: float) -> float:
@@ -618,6 +625,14 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
     return outcome
 
 
+def preview_params(params: MRTParams) -> MRTParams:
+    """``params`` for a preview's stages after its grid: OIDN's preset on the
+    grid :data:`PREVIEW_QUALITY` where ``denoise_quality`` is ``auto``."""
+    if params.denoise_quality != "auto":
+        return params
+    return params.with_(denoise_quality=PREVIEW_QUALITY)
+
+
 def _reconstruction_late(end: float, pattern: SamplePattern, sample_ids: np.ndarray,
                          now: float | None = None) -> bool:
     """Whether the preview's reconstruction without OIDN, started ``now``
@@ -641,7 +656,7 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
     kept = _preview_after_s.get(key)
     if kept:
         return typical(kept)
-    quality = preset(quality)
+    quality = PREVIEW_QUALITY if quality == "auto" else quality
     pixels, oidn = pattern.width * pattern.height, expected_seconds(pattern.count, quality)
     first_call = denoise_seconds(pattern.count, quality) is None
     bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)

@@ -16,7 +16,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..modes import OUTPUT_DENOISED_MODES, reconstruct
-from ..recon.denoise import denoise_grid, denoise_image, preset, textured_pixels
+from ..recon.denoise import denoise_grid, denoise_image, grid_preset, preset, textured_pixels
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, Reconstruction, SparseTrace, Tracer
 from .scene_query import textured_diffuse_shapes
@@ -51,8 +51,9 @@ def mrt_image(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace, param
 
 def denoise_stage(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
                   params: MRTParams) -> SparseTrace:
-    """``trace`` with its radiance denoised as the grid image it forms (or
-    ``trace`` itself without ``params.denoise``).
+    """``trace`` with its radiance denoised as the grid image it forms, at
+    :func:`~mitsuba_mrt.recon.denoise.grid_preset`'s preset (or ``trace``
+    itself without ``params.denoise``).
 
     On textured diffuse surfaces the shading alone is denoised; the pixels
     whose samples all agreed keep their values: the background's, and a
@@ -70,7 +71,7 @@ def denoise_stage(scene: mi.Scene, pattern: SamplePattern, trace: SparseTrace,
                  & ((trace.radiance > 0.0).any(axis=1) | (trace.shape_index == 0)))
         exact = exact.reshape(pattern.grid_shape)
     radiance = denoise_grid(trace.radiance.reshape(grid), trace.albedo.reshape(grid), normal,
-                            params.denoise, preset(params.denoise_quality),
+                            params.denoise, grid_preset(params.denoise_quality),
                             textured=textured.reshape(pattern.grid_shape), exact=exact)
     return replace(trace, radiance=np.asarray(radiance, dtype=np.float64).reshape(-1, 3))
 

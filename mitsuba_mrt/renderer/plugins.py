@@ -133,8 +133,9 @@ class MRTIntegrator(mi.SamplingIntegrator):
      * - denoise_quality
        - |string|
        - OIDN's quality with ``denoise`` ``oidn``: ``fast``, or ``balanced`` and ``high``,
-         a larger network, slower and usually more accurate; ``auto``: ``fast``, but
-         ``auto``'s passes end with ``high`` where it pays (Default: auto).
+         a larger network, slower and usually more accurate; ``auto``: ``high`` on the
+         grid, ``fast`` on whole images, but ``auto``'s passes end with ``high`` where
+         it pays (Default: auto).
      * - noise_smoothing
        - |float|
        - In ``fast``, ``refine`` and ``idpass``: average each traced grid value with

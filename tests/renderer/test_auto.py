@@ -983,6 +983,32 @@ def test_the_grid_marks_as_textured_only_pixels_of_surfaces_with_a_texture(varia
     assert not plain.any() and textured.all()
 
 
+def test_the_grid_is_denoised_at_high_unless_a_preset_is_named_and_a_preview_s_at_fast(
+        variant, monkeypatch):
+    # the grid holds a tenth of the pixels: high's call costs little of the render,
+    # while a preview's time was planned at fast's
+    from mitsuba_mrt.renderer import pipeline
+    from mitsuba_mrt.types import SparseTrace
+
+    presets = []
+    monkeypatch.setattr(pipeline, "denoise_grid",
+                        lambda radiance, *a, **k: presets.append(a[3]) or radiance)
+    scene = mitsuba_mrt.load_scene(ROOT / "scenes_xml/gallery/cornell.xml", res=32)
+    pattern = grid_pattern(32, 32, 0.25)
+    n = pattern.count
+    trace = SparseTrace(radiance=np.ones((n, 3)), albedo=np.ones((n, 3)),
+                        shape_index=np.ones(n, dtype=np.int64),
+                        visible_lights=np.zeros(n, np.uint32), num_lights=0, spp=4,
+                        seconds=0.0, shadow_rays=False)
+    auto_params = MRTParams(denoise="oidn")
+    for params in (auto_params, auto_params.with_(denoise_quality="fast"),
+                   auto_limit.preview_params(auto_params),
+                   auto_limit.preview_params(auto_params.with_(denoise_quality="balanced"))):
+        pipeline.denoise_stage(scene, pattern, trace, params)
+    assert presets == ["high", "fast", auto_limit.PREVIEW_QUALITY, "balanced"]
+    assert auto_limit.PREVIEW_QUALITY == "fast"
+
+
 def test_a_small_textured_image_takes_the_id_pass_unless_a_surface_transmits_light(variant):
     from mitsuba_mrt.renderer.scene_query import transmits
 
@@ -1638,6 +1664,7 @@ def test_a_preview_leaves_its_later_stages_what_the_last_previews_took(scene, mo
     first = mitsuba_mrt.render(scene, time_limit=10.0)
     # nothing kept: the bound per pixel, far below a 10-s limit on this image
     assert first.auto.reason == auto_limit.PREVIEW_REASON and first.spp == PREVIEW_MAX_SPP
+    assert first.params.denoise_quality == auto_limit.PREVIEW_QUALITY  # (as it was planned)
     (took,) = auto_limit._preview_after_s[key]
     assert 0.0 < took < first.timings.total - first.timings.trace
     # ... and its time per pixel beyond OIDN, for other scenes' first previews
