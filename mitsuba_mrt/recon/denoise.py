@@ -52,8 +52,8 @@ def preset(quality: str) -> str:
 #: The preset the MRT's grid is denoised at where ``denoise_quality`` is
 #: ``auto`` (:func:`grid_preset`), and :func:`denoise_grid`'s default: the grid
 #: holds a tenth to a third of the pixels, so that ``high``'s call is a small
-#: share of an MRT render's time, and the error it leaves is lower than
-#: ``fast``'s on every scene of ``bench rival`` (docs/BENCHMARKS.md).
+#: share of an MRT render's time, for a lower error than ``fast``'s on every
+#: scene and mode ``auto`` takes the MRT on (``examples/grid_preset.py``).
 GRID_QUALITY = "high"
 
 
