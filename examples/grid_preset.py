@@ -14,8 +14,9 @@ grid and any whole image through ``fast``), once with ``auto`` (the grid
 through :data:`~mitsuba_mrt.recon.denoise.GRID_QUALITY`, whole images through
 ``fast``) and, for ``refine``, once with ``high`` (its whole image too),
 alternating with the full render over ``--seeds`` seeds.  Printed per
-setting: the median time over the full render's and the mean error (the report's metric against the
-converged renders ``bench rival`` keeps in ``--truths``).
+setting: the median time over the full render's and the mean error (the
+report's metric against the converged renders ``bench rival`` keeps in
+``--truths``).
 """
 
 import argparse
@@ -28,9 +29,15 @@ import numpy as np
 from gallery_scenes import add_truths, load
 
 
+def case(text: str) -> tuple:
+    """A ``SCENE:MODE:FRACTION:SPP`` argument (argparse reports a ValueError)."""
+    name, mode, fraction, spp = text.split(":")
+    return name, mode, float(fraction), int(spp)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("cases", nargs="+", help="SCENE:MODE:FRACTION:SPP")
+    parser.add_argument("cases", nargs="+", type=case, metavar="SCENE:MODE:FRACTION:SPP")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--truth-spp", type=int, default=4096)
@@ -44,15 +51,14 @@ def main():
 
     runtime.configure()
     mitsuba_mrt.activate("auto")
-    for case in args.cases:
-        name, mode, fraction, spp = case.split(":")
+    for name, mode, fraction, spp in args.cases:
         scene = load(name, 400 if name == "paper_fig1" else args.res)
         truth = kept_truth(scene, name, Path(args.truths), args.truth_spp)["film"]
         settings = ["fast", "auto"] + (["high"] if mode == "refine" else [])
 
         def run(quality, seed):
             return mitsuba_mrt.render(scene, mode=mode, denoise="oidn", denoise_quality=quality,
-                                      sample_fraction=float(fraction), spp=int(spp), seed=seed)
+                                      sample_fraction=fraction, spp=spp, seed=seed)
         mitsuba_mrt.render_reference(scene)
         for quality in settings:  # warm-up: kernels recorded, OIDN's filters made
             run(quality, args.seeds)

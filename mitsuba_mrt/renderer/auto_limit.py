@@ -625,12 +625,15 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
     return outcome
 
 
+def preview_preset(quality: str) -> str:
+    """OIDN's preset for a preview's grid at a ``denoise_quality`` setting:
+    ``auto`` is :data:`PREVIEW_QUALITY`."""
+    return PREVIEW_QUALITY if quality == "auto" else quality
+
+
 def preview_params(params: MRTParams) -> MRTParams:
-    """``params`` for a preview's stages after its grid: OIDN's preset on the
-    grid :data:`PREVIEW_QUALITY` where ``denoise_quality`` is ``auto``."""
-    if params.denoise_quality != "auto":
-        return params
-    return params.with_(denoise_quality=PREVIEW_QUALITY)
+    """``params`` for a preview's stages after its grid (:func:`preview_preset`)."""
+    return params.with_(denoise_quality=preview_preset(params.denoise_quality))
 
 
 def _reconstruction_late(end: float, pattern: SamplePattern, sample_ids: np.ndarray,
@@ -656,7 +659,7 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
     kept = _preview_after_s.get(key)
     if kept:
         return typical(kept)
-    quality = PREVIEW_QUALITY if quality == "auto" else quality
+    quality = preview_preset(quality)
     pixels, oidn = pattern.width * pattern.height, expected_seconds(pattern.count, quality)
     first_call = denoise_seconds(pattern.count, quality) is None
     bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)
