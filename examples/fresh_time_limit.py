@@ -1,6 +1,8 @@
 """``auto --time-limit`` as a user's first render: each render in a fresh process.
 
     python examples/fresh_time_limit.py [SCENE ...] [--res 512] [--cold-cache] [--errors]
+    python examples/fresh_time_limit.py --res 512 --errors \
+        --truths docs/bench/rival512/cache --truth-spp 1024
 
 Per gallery scene (all nine by default) at ``--res`` a side (256 by default): the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
@@ -26,7 +28,8 @@ With ``--errors`` each limit's image is kept, and the alternative's ladder
 ``bench rival`` calls the alternative done right) is rendered once per
 scene, each rung in a fresh process too: printed besides, the image's error
 (the report's metric, against the converged renders ``bench rival`` keeps in
-``--truths``) over the lowest of the rungs that ended within the limit.
+``--truths`` at ``--truth-spp``) over the lowest of the rungs that ended
+within the limit.
 """
 
 import argparse
@@ -82,6 +85,8 @@ def main():
                         help="each limit's process with an empty kernel cache")
     parser.add_argument("--errors", action="store_true",
                         help="also each image's error over the alternative's best within the limit")
+    parser.add_argument("--truth-spp", type=int, default=4096,
+                        help="spp of the converged renders in --truths (default 4096)")
     add_truths(parser)
     args = parser.parse_args()
     from mitsuba_mrt.bench.experiments import GALLERY_SCENES
@@ -89,7 +94,8 @@ def main():
     for name in args.scenes or GALLERY_SCENES:
         path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
         full = statistics.median(_child(path, "full", args.res)["seconds"] for _ in range(3))
-        errors = _Errors(path, name, args.res, Path(args.truths)) if args.errors else None
+        errors = (_Errors(path, name, args.res, Path(args.truths), args.truth_spp)
+                  if args.errors else None)
         for share in LIMITS:
             with tempfile.TemporaryDirectory() as folder:
                 image = os.path.join(folder, "image.npy") if errors else "-"
@@ -107,7 +113,7 @@ class _Errors:
     """``--errors``: a scene's converged renders and the alternative's ladder,
     each rung rendered once in a fresh process (:mod:`fresh_default`'s child)."""
 
-    def __init__(self, path: Path, name: str, res: int, truths: Path):
+    def __init__(self, path: Path, name: str, res: int, truths: Path, truth_spp: int):
         import mitsuba_mrt
         from fresh_default import LADDER, _child as ladder_child
         from mitsuba_mrt.bench.experiments import gallery_defines
@@ -117,7 +123,7 @@ class _Errors:
         mitsuba_mrt.activate("auto")
         defines = gallery_defines(name, res)
         scene = mitsuba_mrt.load_scene(str(path), **defines)
-        self.truth = kept_truth(scene, name, truths)
+        self.truth = kept_truth(scene, name, truths, truth_spp)
         self.rungs = []  # (seconds, error)
         with tempfile.TemporaryDirectory() as folder:
             for quality in ("fast", "high"):
