@@ -161,6 +161,12 @@ PRIOR_FIXED = {"fast": 0.006, "balanced": 0.01, "high": 0.01}
 FIRST_CALL_SHARE = 0.35
 
 
+def calls_at(quality: str) -> int:
+    """How many calls at ``quality`` this process has timed, up to
+    :data:`RECENT_CALLS` per image size (1: the first, which set OIDN up)."""
+    return sum(len(calls) for calls in _state.get("recent", {}).get(quality, {}).values())
+
+
 def expected_seconds(pixels: int, quality: str) -> float:
     """What the next call on ``pixels`` pixels at ``quality`` is expected to
     take: the recent calls' on that many pixels; else :func:`denoise_seconds`

@@ -273,7 +273,8 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     if outcome.preview_key is not None and choice.mode == "fast":
         # (its grid was traced: the rest of a preview, for the next one)
         auto_limit.note_preview_after(outcome.preview_key, time.perf_counter() - begin,
-                                      result.timings.denoise, width * height)
+                                      result.timings.denoise, width * height, tracer,
+                                      run.denoise_quality, pattern.count)
     if outcome.kept_key is not None:  # (a kept plan at this spp: what it took, for the next)
         kept_plans.note_render(outcome.kept_key, planned.spp, result.timings.total,
                                recordings() == recorded.count)

@@ -9,8 +9,9 @@ one pass and OIDN on every pixel would overrun the limit
 (:func:`preview_first`, :func:`filled_preview`).  What the process's
 earlier renders took (their first round, their last OIDN call, the passes'
 launches, the grid probe, a preview's stages after its grid) is kept here,
-per scene key, to plan the next one; the passes' launches and the grid
-probe also for later processes (:mod:`mitsuba_mrt.runtime.memory`),
+per scene key, to plan the next one; the passes' launches, the grid
+probe and a fresh process's preview stages also for later processes
+(:mod:`mitsuba_mrt.runtime.memory`),
 which plan from them where they have measured nothing themselves (a
 remembered probe is not traced again: it takes a fifth of the smallest limits).
 """
@@ -27,8 +28,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..modes.plan import Candidate, Plan
-from ..recon.denoise import (denoise_seconds, expected_seconds, grid_preset, preset,
-                             prior_seconds)
+from ..recon.denoise import (calls_at, denoise_seconds, expected_seconds, grid_preset,
+                             preset, prior_seconds)
 from ..recon.ids import edge_share
 from ..recon.sampling import SamplePattern
 from ..runtime import memory
@@ -609,7 +610,7 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
     without OIDN (:data:`UNDENOISED_NOTE`), and where even its
     reconstruction would (:func:`_reconstruction_late`), it is the grid
     upsampled (:data:`UPSAMPLED_NOTE`)."""
-    after = _preview_after(key, pattern, params.denoise_quality)
+    after = _preview_after(key, pattern, params.denoise_quality, tracer)
     grid = preview_grid(outcome.grid, pattern, tracer,
                         started + TIME_MARGIN * params.time_limit - after)
     plan = outcome.plan
@@ -647,35 +648,84 @@ def _reconstruction_late(end: float, pattern: SamplePattern, sample_ids: np.ndar
     return begin + per_pixel * pattern.width * pattern.height > end
 
 
-def _preview_after(key: tuple, pattern: SamplePattern, quality: str) -> float:
+def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer=None) -> float:
     """The seconds a preview's stages after its grid (OIDN on the grid, the
     reconstruction, the finish) are expected to take: the median of the last
-    denoised previews' of ``key`` (:data:`_preview_after_s`); else
-    :data:`FINISH_PER_PIXEL`'s bound (before OIDN's first call at the
-    preview's quality, that call's expected time on top, which holds its
-    set-up), or where less, the largest time per pixel beyond OIDN of this
-    process's last previews (:data:`_preview_rate`) and OIDN's expected
-    time."""
+    denoised previews' of ``key`` (:data:`_preview_after_s`); before OIDN's
+    first call at the preview's quality, the longest that earlier processes'
+    first previews of the scene took (:func:`_recalled_preview_after`),
+    where remembered; else :data:`FINISH_PER_PIXEL`'s bound (before that
+    first call, its expected time on top, which holds its set-up), or where
+    less, the largest time per pixel beyond OIDN of this process's last
+    previews (:data:`_preview_rate`) and OIDN's expected time."""
     kept = _preview_after_s.get(key)
     if kept:
         return typical(kept)
     quality = preview_preset(quality)
     pixels, oidn = pattern.width * pattern.height, expected_seconds(pattern.count, quality)
     first_call = denoise_seconds(pattern.count, quality) is None
+    recalled = _recalled_preview_after(key, tracer, quality, pattern.count) if first_call else None
+    if recalled is not None:
+        return recalled
     bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)
     return min(bound, max(_preview_rate) * pixels + oidn) if _preview_rate else bound
 
 
-def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int) -> None:
+def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int,
+                       tracer=None, quality: str = PREVIEW_QUALITY, grid: int = 0) -> None:
     """Keep what the stages after a preview's grid took (``seconds``, of
     which OIDN ``denoise``; 0 without OIDN) on an image of ``pixels``: for
     the next preview of ``key`` where it was denoised
     (:data:`_preview_after_s`), and as a time per pixel beyond OIDN for
-    the first preview of another scene (:data:`_preview_rate`)."""
+    the first preview of another scene (:data:`_preview_rate`).  Where its
+    OIDN call (at ``quality``, on a grid of ``grid`` pixels) was the
+    process's first at that quality, as a fresh process's preview makes it,
+    also for later processes' first previews of the scene (with ``tracer``:
+    :func:`_remember_preview_after`)."""
     if denoise > 0.0:
         note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
              PREVIEW_AFTER_CALLS)
+        if tracer is not None and calls_at(quality) == 1:
+            _remember_preview_after(key, tracer, seconds, quality, grid)
     note(_preview_rate, max(seconds - denoise, 0.0) / pixels, PREVIEW_RATE_CALLS)
+
+
+def _remember_preview_after(key: tuple, tracer, seconds: float, quality: str,
+                            grid: int) -> None:
+    """Keep ``seconds``, what a process's first preview of ``key``'s scene
+    took after its grid (OIDN's first call at ``quality``, on ``grid``
+    pixels, in it), with the last earlier ones (:data:`PREVIEW_AFTER_CALLS`),
+    for later processes (:mod:`mitsuba_mrt.runtime.memory`)."""
+    if not memory.enabled():
+        return
+    memory_key = f"{_memory_key(key, tracer)}/preview"
+    kept = _remembered_preview_after(memory.recall(memory_key), quality, grid)
+    note(kept, float(seconds), PREVIEW_AFTER_CALLS)
+    memory.remember(memory_key, {"quality": quality, "grid": int(grid), "seconds": kept})
+
+
+def _recalled_preview_after(key: tuple, tracer, quality: str, grid: int) -> float | None:
+    """The longest of what earlier processes' first previews of ``key``'s
+    scene took after their grid (:func:`_remember_preview_after`), at
+    ``quality`` on a grid of ``grid`` pixels; None where none is remembered
+    (or the memory is off, or no ``tracer`` names the scene)."""
+    if tracer is None or not memory.enabled():
+        return None
+    kept = _remembered_preview_after(memory.recall(f"{_memory_key(key, tracer)}/preview"),
+                                     quality, grid)
+    return max(kept, default=None)
+
+
+def _remembered_preview_after(value: dict | None, quality: str, grid: int) -> list:
+    """The seconds a remembered ``value`` holds for previews at ``quality``
+    on a grid of ``grid`` pixels (finite, positive); [] for any other."""
+    value = value or {}
+    seconds = value.get("seconds")
+    if (value.get("quality") != quality or value.get("grid") != int(grid)
+            or not isinstance(seconds, list)):
+        return []
+    return [float(v) for v in seconds
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < math.inf]
 
 
 def _passes_recording_s(key: tuple, probed: "_Probe") -> float:

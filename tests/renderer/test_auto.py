@@ -1703,6 +1703,57 @@ def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(sc
     assert not mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.denoise
 
 
+def test_a_fresh_preview_s_later_stages_are_remembered_for_later_processes(tmp_path,
+                                                                          monkeypatch):
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    monkeypatch.setattr(auto_limit, "_memory_key", lambda key, tracer: "scene")
+    key, tracer = ("token", 4), object()
+    assert auto_limit._recalled_preview_after(key, tracer, "fast", 10) is None
+    for seconds in (0.05, 0.09, 0.06, 0.07):
+        auto_limit._remember_preview_after(key, tracer, seconds, "fast", 10)
+    # the longest of the last three a fresh process took
+    assert auto_limit._recalled_preview_after(key, tracer, "fast", 10) == 0.09
+    # of another preset or grid size: none; nor without the tracer that names the scene
+    assert auto_limit._recalled_preview_after(key, tracer, "high", 10) is None
+    assert auto_limit._recalled_preview_after(key, tracer, "fast", 11) is None
+    assert auto_limit._recalled_preview_after(key, None, "fast", 10) is None
+    # a value not of this kind is none, its bad entries dropped
+    assert auto_limit._remembered_preview_after({"quality": "fast", "grid": 10, "seconds": [
+        0.1, "x", -1.0, True, math.inf]}, "fast", 10) == [0.1]
+    assert auto_limit._remembered_preview_after({"quality": "fast", "grid": 10,
+                                                  "seconds": 0.1}, "fast", 10) == []
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")
+    assert auto_limit._recalled_preview_after(key, tracer, "fast", 10) is None
+
+
+def test_a_process_s_first_preview_leaves_what_an_earlier_process_s_first_took(
+        scene, tmp_path, monkeypatch):
+    from mitsuba_mrt.renderer.state import clear_caches
+
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    monkeypatch.setattr(auto_limit, "UNPROBED_OVER_OIDN", 1e6)  # (the limit asks the probe)
+    monkeypatch.setattr(auto_limit, "unmeasured_plan", lambda *args: None)  # (no MRT plan)
+    monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
+    clear_caches()  # (a process that rendered nothing: the preview makes OIDN's first call)
+    first = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert first.auto.reason == auto_limit.PREVIEW_REASON and first.auto.choice.denoise
+    # the next process: what the first took after its grid, not the bound (days)
+    monkeypatch.setattr(auto_limit, "FINISH_PER_PIXEL", 1.0)
+    clear_caches()
+    again = mitsuba_mrt.render(scene, time_limit=10.0)
+    assert again.auto.choice.denoise and again.spp == PREVIEW_MAX_SPP
+    # a later preview in that process made no first call: it is not remembered
+    remembered = json.loads((tmp_path / "memory.json").read_text())["scenes"]
+    (kept,) = [v["seconds"] for k, v in remembered.items() if k.endswith("/preview")]
+    assert len(kept) == 2
+    mitsuba_mrt.render(scene, time_limit=10.0)
+    remembered = json.loads((tmp_path / "memory.json").read_text())["scenes"]
+    assert [v["seconds"] for k, v in remembered.items() if k.endswith("/preview")] == [kept]
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", "off")  # nothing recalled: the bound
+    clear_caches()
+    assert not mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.denoise
+
+
 def test_a_pass_a_probe_times_must_fit_the_limit_itself(scene, monkeypatch):
     # with no pass measured in the process, the probe's guess of one is held to
     # PROBED_SLACK times the limit, not PREVIEW_SLACK's
