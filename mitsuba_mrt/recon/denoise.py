@@ -36,17 +36,18 @@ from .compose import safe_albedo
 QUALITIES = ("fast", "balanced", "high")
 
 
-def preset(quality: str) -> str:
-    """OIDN's preset for a ``denoise_quality`` setting on a whole image:
-    ``auto`` is ``fast`` (``auto``'s passes choose their last call's preset
-    themselves; the MRT's grid takes :func:`grid_preset`'s).
+def preset(quality: str, auto: str = "fast") -> str:
+    """OIDN's preset for a ``denoise_quality`` setting: ``auto`` is ``auto``'s
+    preset, by default a whole image's, ``fast`` (``auto``'s passes choose
+    their last call's preset themselves; the MRT's grid takes
+    :func:`grid_preset`'s).
 
     Examples
     --------
-    >>> preset("auto"), preset("high")
-    ('fast', 'high')
+    >>> preset("auto"), preset("high"), preset("auto", auto="high")
+    ('fast', 'high', 'high')
     """
-    return "fast" if quality == "auto" else quality
+    return auto if quality == "auto" else quality
 
 
 #: The preset the MRT's grid is denoised at where ``denoise_quality`` is
@@ -67,7 +68,7 @@ def grid_preset(quality: str) -> str:
     >>> grid_preset("auto"), grid_preset("fast")
     ('high', 'fast')
     """
-    return GRID_QUALITY if quality == "auto" else quality
+    return preset(quality, GRID_QUALITY)
 
 #: Committed filters kept (a render alternates a few image sizes: the grid,
 #: ``auto``'s estimate rows and the whole image; a new size costs a commit).

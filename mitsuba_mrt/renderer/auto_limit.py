@@ -629,7 +629,7 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
 def preview_preset(quality: str) -> str:
     """OIDN's preset for a preview's grid at a ``denoise_quality`` setting:
     ``auto`` is :data:`PREVIEW_QUALITY`."""
-    return PREVIEW_QUALITY if quality == "auto" else quality
+    return preset(quality, PREVIEW_QUALITY)
 
 
 def preview_params(params: MRTParams) -> MRTParams:
@@ -648,7 +648,7 @@ def _reconstruction_late(end: float, pattern: SamplePattern, sample_ids: np.ndar
     return begin + per_pixel * pattern.width * pattern.height > end
 
 
-def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer=None) -> float:
+def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer) -> float:
     """The seconds a preview's stages after its grid (OIDN on the grid, the
     reconstruction, the finish) are expected to take: the median of the last
     denoised previews' of ``key`` (:data:`_preview_after_s`); before OIDN's
@@ -672,7 +672,7 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer=None
 
 
 def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int,
-                       tracer=None, quality: str = PREVIEW_QUALITY, grid: int = 0) -> None:
+                       tracer, quality: str, grid: int) -> None:
     """Keep what the stages after a preview's grid took (``seconds``, of
     which OIDN ``denoise``; 0 without OIDN) on an image of ``pixels``: for
     the next preview of ``key`` where it was denoised
@@ -680,12 +680,12 @@ def note_preview_after(key: tuple, seconds: float, denoise: float, pixels: int,
     the first preview of another scene (:data:`_preview_rate`).  Where its
     OIDN call (at ``quality``, on a grid of ``grid`` pixels) was the
     process's first at that quality, as a fresh process's preview makes it,
-    also for later processes' first previews of the scene (with ``tracer``:
-    :func:`_remember_preview_after`)."""
+    also for later processes' first previews of the scene
+    (:func:`_remember_preview_after`)."""
     if denoise > 0.0:
         note(_keep(_preview_after_s, key, _preview_after_s.get(key, [])), seconds,
              PREVIEW_AFTER_CALLS)
-        if tracer is not None and calls_at(quality) == 1:
+        if calls_at(quality) == 1:
             _remember_preview_after(key, tracer, seconds, quality, grid)
     note(_preview_rate, max(seconds - denoise, 0.0) / pixels, PREVIEW_RATE_CALLS)
 
@@ -698,7 +698,7 @@ def _remember_preview_after(key: tuple, tracer, seconds: float, quality: str,
     for later processes (:mod:`mitsuba_mrt.runtime.memory`)."""
     if not memory.enabled():
         return
-    memory_key = f"{_memory_key(key, tracer)}/preview"
+    memory_key = _preview_memory_key(key, tracer)
     kept = _remembered_preview_after(memory.recall(memory_key), quality, grid)
     note(kept, float(seconds), PREVIEW_AFTER_CALLS)
     memory.remember(memory_key, {"quality": quality, "grid": int(grid), "seconds": kept})
@@ -711,9 +711,14 @@ def _recalled_preview_after(key: tuple, tracer, quality: str, grid: int) -> floa
     (or the memory is off, or no ``tracer`` names the scene)."""
     if tracer is None or not memory.enabled():
         return None
-    kept = _remembered_preview_after(memory.recall(f"{_memory_key(key, tracer)}/preview"),
+    kept = _remembered_preview_after(memory.recall(_preview_memory_key(key, tracer)),
                                      quality, grid)
     return max(kept, default=None)
+
+
+def _preview_memory_key(key: tuple, tracer) -> str:
+    """The key of ``key``'s scene's previews in the memory of earlier processes."""
+    return f"{_memory_key(key, tracer)}/preview"
 
 
 def _remembered_preview_after(value: dict | None, quality: str, grid: int) -> list:
