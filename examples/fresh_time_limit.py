@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from fresh_child import fresh_child
-from gallery_scenes import add_truths
+from gallery_scenes import add_truth_spp, add_truths
 
 ROOT = Path(__file__).resolve().parents[1]
 LIMITS = (0.1, 0.25, 0.5)
@@ -85,8 +85,7 @@ def main():
                         help="each limit's process with an empty kernel cache")
     parser.add_argument("--errors", action="store_true",
                         help="also each image's error over the alternative's best within the limit")
-    parser.add_argument("--truth-spp", type=int, default=4096,
-                        help="spp of the converged renders in --truths (default 4096)")
+    add_truth_spp(parser)
     add_truths(parser)
     args = parser.parse_args()
     from mitsuba_mrt.bench.experiments import GALLERY_SCENES

@@ -2,6 +2,7 @@
 a scene by its gallery name, and the ``--truths`` option naming where those
 renders are kept."""
 
+import argparse
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -13,6 +14,25 @@ def add_truths(parser) -> None:
     """Add ``--truths`` (a folder; :data:`TRUTHS` by default) to ``parser``."""
     parser.add_argument("--truths", default=str(TRUTHS),
                         help="folder of the converged renders bench rival keeps")
+
+
+def add_truth_spp(parser) -> None:
+    """Add ``--truth-spp`` (the spp of the converged renders in ``--truths``;
+    4096 by default), refused as ``bench rival`` refuses it: one line, exit 2."""
+    parser.add_argument("--truth-spp", type=_truth_spp, default=4096,
+                        help="spp of the converged renders in --truths, a multiple of 128 "
+                             "(default 4096)")
+
+
+def _truth_spp(text: str) -> int:
+    from mitsuba_mrt.bench.rival import check_truth_spp
+
+    try:
+        return check_truth_spp(int(text))
+    except ValueError as error:  # (MRTError is one)
+        raise argparse.ArgumentTypeError(
+            str(error) if text.strip().lstrip("-").isdigit()
+            else f"--truth-spp expects an integer, got {text!r}") from None
 
 
 def load(name: str, res: int):

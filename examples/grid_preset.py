@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gallery_scenes import add_truths, load
+from gallery_scenes import add_truth_spp, add_truths, load
 
 
 def case(text: str) -> tuple:
@@ -40,7 +40,7 @@ def main():
     parser.add_argument("cases", nargs="+", type=case, metavar="SCENE:MODE:FRACTION:SPP")
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--truth-spp", type=int, default=4096)
+    add_truth_spp(parser)
     add_truths(parser)
     args = parser.parse_args()
 
