@@ -162,6 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--truth-spp", type=int, default=None, metavar="N",
                    help="rival: spp of the converged renders errors are measured against, "
                         "a multiple of 128 (default 4096; kept in OUTPUT/cache)")
+    b.add_argument("--no-oidn", action="store_true",
+                   help="rival: as without Intel Open Image Denoise installed (the "
+                        "alternative: the full render at fewer spp)")
     b.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="measure the points on the Dask cluster of this scheduler "
                         "(tcp://host:8786), a point's methods all on one worker "
@@ -232,6 +235,8 @@ def _bench(args) -> int:
     os.environ.setdefault("MITSUBA_MRT_MEMORY", "off")
     if args.experiment == "rival":
         return _rival(args, command)
+    if args.no_oidn:
+        raise MRTError("--no-oidn is an option of bench rival")
     with contextlib.ExitStack() as stack:
         map_points = None
         if args.scheduler or args.workers is not None:
@@ -266,7 +271,7 @@ def _rival(args, command: str) -> int:
                    {**FIG1_DEFINES, **({"res": 64} if args.quick else {})}))
     repeats = (1 if args.quick else 2) if args.repeats is None else args.repeats
     table = run_rival(args.output, scenes, repeats=repeats, quick=args.quick, command=command,
-                      truth_spp=truth_spp,
+                      truth_spp=truth_spp, oidn=not args.no_oidn,
                       echo=lambda line: print(line, file=sys.stderr))
     print(f"rival: table {table}")
     return 0

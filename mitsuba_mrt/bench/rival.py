@@ -20,6 +20,12 @@ Beside the report's metric, the field's: relative MSE, NVIDIA's FLIP where
 the ``flip-evaluator`` package is installed (``pip install
 mitsuba-mrt[bench]``), and the MSE with the converged renders' own noise
 removed (:func:`noise_free_mse`).
+
+With ``oidn=False`` (``bench rival --no-oidn``) every method runs as in a
+process without OIDN installed (:func:`~mitsuba_mrt.recon.denoise.hidden`):
+the alternative is then the full render at the ladder's spp through the
+film's own filter (methods ``full@4``), and the MRT's configurations go
+undenoised.
 """
 
 from __future__ import annotations
@@ -45,6 +51,9 @@ LADDER = (1, 2, 4, 8, 16, 32, 64)
 #: OIDN's presets the alternative runs its ladder at, and the prefix of each
 #: one's methods (``oidn@4``, ``oidn-high@4``).
 ALTERNATIVE = {"fast": "oidn@", "high": "oidn-high@"}
+#: The prefix of the alternative's methods without OIDN (``full@4``): the
+#: full render at fewer spp, through the film's filter.
+PLAIN = "full@"
 #: The default ``auto`` with no plan kept from an earlier render of the scene
 #: (:mod:`~mitsuba_mrt.renderer.kept_plans`): probes, check and estimates
 #: included.  Each round runs it just before ``auto``, which takes its plan.
@@ -222,9 +231,20 @@ def _read_truth(cache: Path | None, shape: tuple) -> Truth | None:
 
 
 def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool,
-                  truth_spp: int = CONVERGED_SPP, cache: Path | None = None) -> list[Row]:
+                  truth_spp: int = CONVERGED_SPP, cache: Path | None = None,
+                  oidn: bool = True) -> list[Row]:
     """Every method of the module on one scene, as :class:`Row` s; its
-    converged renders at ``truth_spp`` (kept in the folder ``cache``)."""
+    converged renders at ``truth_spp`` (kept in the folder ``cache``);
+    without ``oidn``, as in a process without OIDN (see the module)."""
+    from ..recon.denoise import hidden
+
+    with hidden(not oidn):
+        return _measure_scene(path, name, defines, repeats, quick, truth_spp, cache, oidn)
+
+
+def _measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool,
+                   truth_spp: int, cache: Path | None, oidn: bool) -> list[Row]:
+    """:func:`measure_scene`'s work."""
     from ..renderer import kept_plans
     from ..renderer.api import render, render_denoised, render_reference
     from ..renderer.scene import load_scene
@@ -238,16 +258,22 @@ def measure_scene(path: str, name: str, defines: dict, repeats: int, quick: bool
     def alternative(s, quality):
         return lambda seed: render_denoised(scene, spp=s, quality=quality, seed=seed)
 
-    methods = {"full": lambda seed: render_reference(scene, spp=spp, seed=seed)}
-    for quality, prefix in ALTERNATIVE.items():
-        methods.update({f"{prefix}{s}": alternative(s, quality) for s in ladder})
+    def plain(s):
+        return lambda seed: render_reference(scene, spp=s, seed=seed)
+
+    methods = {"full": plain(spp)}
+    if oidn:
+        for quality, prefix in ALTERNATIVE.items():
+            methods.update({f"{prefix}{s}": alternative(s, quality) for s in ladder})
+    else:  # (the full render's spp too: the curve is its rungs)
+        methods.update({f"{PLAIN}{s}": plain(s) for s in ladder + [spp] * (spp not in ladder)})
 
     def planned(seed):  # the plan chosen anew, as in a process's first render of the scene
         kept_plans.clear()
         return render(scene, mode="auto", seed=seed)
     methods[PLANNED] = planned
     methods["auto"] = lambda seed: render(scene, mode="auto", seed=seed)  # (the plan kept)
-    for m, d in CONFIGS:
+    for m, d in (CONFIGS if oidn else [(m, d) for m, d in CONFIGS if d == "none"]):
         methods[f"{m}+{d}" if d != "none" else m] = (
             lambda seed, m=m, d=d: render(scene, mode=m, denoise=d, seed=seed))
     times = {k: [] for k in methods}
@@ -307,7 +333,7 @@ def _score(method: str, out, spp: int, truth: Truth) -> _Score:
     chose = ""
     if not isinstance(out, tuple) and out.auto is not None:
         chose = out.auto.choice.label
-    spp_used = int(method.split("@")[1]) if _alternative(method) else (
+    spp_used = int(method.split("@")[1]) if _ladder(method) else (
         spp if method == "full" else int(out.spp))
     return _Score(paper_error(image, reference), rel_mse(image, reference),
                   flip_error(image, reference), chose, spp_used,
@@ -347,14 +373,22 @@ def at_time(rows: list[Row], prefix: str, seconds: float, metric: str = "error",
 def alternative_at(rows: list[Row], seconds: float, metric: str = "error") -> float:
     """The alternative's ``metric`` at ``seconds``: the lower of its presets'
     curves (:func:`at_time`; the ``fast`` curve's 1-spp end stands for any
-    shorter time, the others count only from their first point)."""
-    fast = ALTERNATIVE["fast"]
-    return min(at_time(rows, p, seconds, metric, None if p == fast else math.inf)
-               for p in ALTERNATIVE.values() if any(r.method.startswith(p) for r in rows))
+    shorter time, the others count only from their first point), or without
+    OIDN the full render's curve (:data:`PLAIN`)."""
+    prefixes = [p for p in (*ALTERNATIVE.values(), PLAIN)
+                if any(r.method.startswith(p) for r in rows)]
+    return min(at_time(rows, p, seconds, metric, None if p == prefixes[0] else math.inf)
+               for p in prefixes)
 
 
 def _alternative(method: str) -> bool:
+    """Whether ``method`` is a rung of the alternative denoised by OIDN."""
     return method.startswith(tuple(ALTERNATIVE.values()))
+
+
+def _ladder(method: str) -> bool:
+    """Whether ``method`` is a rung of the alternative, with OIDN or without."""
+    return method.startswith((*ALTERNATIVE.values(), PLAIN))
 
 
 def verdicts(rows: list[Row]) -> list[dict]:
@@ -376,7 +410,7 @@ def verdicts(rows: list[Row]) -> list[dict]:
         for r in mine:
             if r.method.startswith("auto --time-limit"):
                 share = float(r.method.rsplit(" ", 1)[1])
-                best_in = min((x.error for x in mine if _alternative(x.method)
+                best_in = min((x.error for x in mine if _ladder(x.method)
                                and x.relative_time <= share), default=float("nan"))
                 limits[share] = (r.relative_time / share, r.error, best_in)
         out.append(dict(scene=scene, auto=auto, alternative=alt, best=best, limits=limits,
@@ -432,10 +466,12 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 3.0), squeeze=False)
     for ax, scene in zip(axes[0], scenes):
         mine = [r for r in rows if r.scene == scene]
-        for (quality, prefix), shade in zip(ALTERNATIVE.items(), ("0.5", "0.75")):
+        curves = [(prefix, f"full + OIDN {quality} (box)")
+                  for quality, prefix in ALTERNATIVE.items()] + [(PLAIN, "full render")]
+        for (prefix, label), shade in zip(curves, ("0.5", "0.75", "0.5")):
             alt = sorted((r.relative_time, r.error) for r in mine if r.method.startswith(prefix))
             if alt:
-                ax.plot(*zip(*alt), "o-", color=shade, label=f"full + OIDN {quality} (box)")
+                ax.plot(*zip(*alt), "o-", color=shade, label=label)
         for r in mine:
             if r.method.startswith("auto"):
                 marker = {"auto": "r*", PLANNED: "r+"}.get(r.method, "rx")
@@ -443,7 +479,7 @@ def _write_files(out: OutputSet, rows: list[Row], command: str) -> None:
             elif r.method == CONVERGED:  # the errors' floor: the converged renders' own
                 for floor in (r.error, float(r.chose)):
                     ax.axhline(floor, ls=":", lw=0.8, color="0.6")
-            elif not _alternative(r.method):
+            elif not _ladder(r.method):
                 ax.plot(r.relative_time, r.error, "b." if r.method != "full" else "ks")
         ax.set_xscale("log")
         ax.set_yscale("log")
@@ -479,15 +515,16 @@ def check_truth_spp(spp) -> int:
 
 def run_rival(out_dir, scenes: list[tuple[str, str, dict]], repeats: int = 2,
               quick: bool = False, command: str = "", echo=print,
-              truth_spp: int = CONVERGED_SPP) -> Path:
+              truth_spp: int = CONVERGED_SPP, oidn: bool = True) -> Path:
     """Measure every (path, name, defines) of ``scenes``; write the report.
     The converged renders (``truth_spp``) are kept in ``out_dir``'s
-    :data:`CACHE_DIR` and read back by the next run."""
+    :data:`CACHE_DIR` and read back by the next run.  Without ``oidn``, as
+    in a process without OIDN (see the module)."""
     repeats = check_repeats(repeats)
     rows = []
     for path, name, defines in scenes:
         begin = time.perf_counter()
         rows += measure_scene(path, name, defines, repeats, quick, truth_spp,
-                              Path(out_dir) / CACHE_DIR)
+                              Path(out_dir) / CACHE_DIR, oidn)
         echo(f"rival: {name} in {time.perf_counter() - begin:.0f} s")
     return write_report(Path(out_dir), rows, command)

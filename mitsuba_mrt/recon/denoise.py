@@ -21,6 +21,7 @@ is not reentrant.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import threading
 import time
 from collections import OrderedDict
@@ -92,10 +93,15 @@ _lock = threading.Lock()
 _state: dict = {}
 # (non-empty once release() is registered to run when Python exits)
 _released_at_exit: list = []
+# whether OIDN counts as not installed: the innermost hidden() block's
+_hidden = [False]
 
 
 def _oidn():
-    """The mitsuba_oidn module, or MRTError naming the extra."""
+    """The mitsuba_oidn module, or MRTError naming the extra (also within
+    :func:`hidden`)."""
+    if _hidden[-1]:
+        raise MRTError(MISSING)
     try:
         import mitsuba_oidn
     except ImportError:
@@ -113,6 +119,26 @@ def oidn_available() -> bool:
     except MRTError:
         return False
     return True
+
+
+@contextlib.contextmanager
+def hidden(enabled: bool = True):
+    """Within the block (where ``enabled``), OIDN counts as not installed:
+    :func:`oidn_available` is False and every call raises the missing
+    extra's :class:`MRTError`, as in a process without ``mitsuba-oidn``
+    (``bench rival --no-oidn`` measures ``auto`` so).
+
+    Examples
+    --------
+    >>> with hidden():
+    ...     oidn_available()
+    False
+    """
+    _hidden.append(bool(enabled))
+    try:
+        yield
+    finally:
+        _hidden.pop()
 
 
 def release() -> None:

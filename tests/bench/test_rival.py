@@ -47,6 +47,40 @@ def test_verdicts_compare_auto_with_the_alternative_and_hindsight():
     assert ratio == pytest.approx(0.26 / 0.25) and error == 0.021 and best_within == 0.04
 
 
+def test_without_oidn_the_alternative_is_the_full_render_curve():
+    plain = [Row("s", f"full@{spp}", spp, 0.0, spp / 64, e, 0.0) for spp, e in
+             ((4, 0.08), (16, 0.04), (64, 0.02))]
+    plain += [Row("s", "full", 64, 1.0, 1.0, 0.02, 0.0),
+              Row("s", "auto", 64, 0.0, 0.25, 0.03, 0.0, "idpass @ 64 spp"),
+              Row("s", "auto --time-limit 0.5", 64, 0.0, 0.45, 0.05, 0.0, "passes @ 28 spp")]
+    assert alternative_at(plain, 0.25) == pytest.approx(0.04)
+    assert alternative_at(plain, 0.01) == pytest.approx(0.08)  # its 1st rung stands for less
+    (v,) = verdicts(plain)
+    assert v["alternative"] == pytest.approx(0.04) and v["limits"][0.5][2] == 0.04
+
+
+def test_rival_without_oidn_renders_the_plain_ladder_as_if_oidn_were_missing(tmp_path, variant,
+                                                                           monkeypatch):
+    from mitsuba_mrt.recon import denoise
+    from mitsuba_mrt.renderer import api
+
+    seen, render = [], api.render
+
+    def spy(*args, **kwargs):
+        seen.append(denoise.oidn_available())
+        return render(*args, **kwargs)
+    monkeypatch.setattr(api, "render", spy)
+    run_rival(tmp_path, [(ROOT / "scenes_xml" / "gallery" / "cornell.xml", "cornell",
+                          {"res": 32, "spp": 4})], repeats=1, quick=True,
+              command="test", echo=lambda line: None, oidn=False)
+    lines = (tmp_path / "rival.csv").read_text().splitlines()
+    methods = {line.split(",")[1] for line in lines[1:]}
+    assert {"full", "full@1", "full@4", "auto", "fast", "idpass",
+            "auto --time-limit 0.5"} <= methods
+    assert not any(m.startswith("oidn") or m.endswith("+oidn") for m in methods)
+    assert seen and not any(seen)  # every render as without OIDN
+
+
 def test_rel_mse_weighs_dark_pixels_more():
     import numpy as np
 
@@ -161,3 +195,13 @@ def test_a_bad_truth_spp_is_one_line_and_exit_2(tmp_path):
                          cwd=ROOT)
     assert out.returncode == 2 and not (tmp_path / "out").exists()
     assert out.stderr.strip() == "error: --truth-spp must be a multiple of 128, got 100"
+
+
+def test_no_oidn_outside_rival_is_one_line_and_exit_2(tmp_path):
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "mitsuba_mrt", "bench", "gallery", "--no-oidn",
+                          "-o", str(tmp_path / "out")], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 2 and not (tmp_path / "out").exists()
+    assert out.stderr.strip() == "error: --no-oidn is an option of bench rival"

@@ -162,6 +162,20 @@ def test_missing_extra_is_a_one_line_error(monkeypatch):
     assert "pip install mitsuba-mrt[denoise]" in MISSING and "\n" not in MISSING
 
 
+def test_within_hidden_oidn_is_missing_and_after_it_is_back(oidn):
+    from mitsuba_mrt.recon import denoise
+
+    image = np.full((4, 4, 3), 0.5)
+    with denoise.hidden():
+        assert not denoise.oidn_available()
+        with pytest.raises(MRTError) as exc:
+            denoise_image(image, *_guides(image.shape))
+        assert str(exc.value) == MISSING
+        with denoise.hidden(False):  # (the innermost block's say)
+            assert denoise.oidn_available()
+    assert denoise.oidn_available() and np.isfinite(denoise_image(image)).all()
+
+
 def test_render_with_denoise_times_the_stage(oidn, variant):
     import mitsuba as mi
     from helpers import small_scene_xml
