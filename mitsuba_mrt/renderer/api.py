@@ -255,10 +255,7 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
         outcome = auto_plans.AutoOutcome(plan)
     plan, choice = outcome.plan, outcome.plan.choice
     if choice.kind == "full":
-        image, alpha, seconds = _full_render(scene, tracer.integrator, sensor, choice.spp,
-                                             tracer.seed)
-        return _whole_image_result(image, alpha, params, choice.spp, plan,
-                                   Timings(check=plan.pilot_s, full_render=seconds), start)
+        return _full_result(tracer, params, plan, start)
     if choice.fraction is not None:  # (the plan chose its grid)
         pattern = grid_pattern(width, height, choice.fraction)
     planned = replace(tracer, spp=choice.spp, id_pass=outcome.id_pass)
@@ -284,10 +281,11 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
              params: MRTParams, start: float, recorded: Recorded, progress) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
-    check keeps it (:func:`.auto_plans.keeps`; then :mod:`.kept_plans` keeps what
-    it took, less what recording its traces took since ``recorded``); else
-    ``auto``'s denoised passes, the MRT's seconds and the check's counted
-    as ``check``."""
+    check keeps it (:func:`.auto_plans.keeps`; then, for a denoised plan,
+    :mod:`.kept_plans` keeps what it took, less what recording its traces
+    took since ``recorded``); else
+    ``auto``'s denoised passes (without OIDN, the full render), the MRT's
+    seconds and the check's counted as ``check``."""
     recording_s = recording_seconds() - recorded.seconds  # (the check's own left out)
     held = check_image(result.image, result.traced_mask, tracer,
                        effective_area(tracer.sensor.film().rfilter()))
@@ -298,11 +296,12 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
     if auto_plans.keeps(held):
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
-        key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
-        key += auto.plan_key(tracer, params)
-        kept_plans.note_checked(key, plan.choice, plan.reason,
-                                result.timings.total - held.seconds, result.timings,
-                                recording_s, auto_limit.plan_memory_key(key, tracer))
+        if plan.choice.denoise:  # (a plan without OIDN is not taken again: it is checked)
+            key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
+            key += auto.plan_key(tracer, params)
+            kept_plans.note_checked(key, plan.choice, plan.reason,
+                                    result.timings.total - held.seconds, result.timings,
+                                    recording_s, auto_limit.plan_memory_key(key, tracer))
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)
@@ -310,10 +309,22 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
                            f"a full render's {held.full_error:.4f}): {outcome.plan.reason}")
     outcome.plan.candidates = [plan.choice]
     outcome.plan.pilot_s += result.timings.total + held.seconds
+    if outcome.image is None:  # (no denoiser: the full render)
+        return _full_result(tracer, params, outcome.plan, start)
     passes = _passes_result(outcome, tracer, params, start)
     passes.timings.check += result.timings.total + held.seconds
     passes.timings.close(passes.timings.total)
     return passes
+
+
+def _full_result(tracer: GridTracer, params: MRTParams, plan: Plan, start: float) -> MRTResult:
+    """The full render ``plan`` chose (``mi.render``'s own image), what
+    ``auto`` spent before it counted as ``check``."""
+    spp = plan.choice.spp
+    image, alpha, seconds = _full_render(tracer.scene, tracer.integrator, tracer.sensor, spp,
+                                         tracer.seed)
+    return _whole_image_result(image, alpha, params, spp, plan,
+                               Timings(check=plan.pilot_s, full_render=seconds), start)
 
 
 def _quiet(stage: str, done: float) -> None:

@@ -12,11 +12,16 @@ the check or the estimates that chose it: :func:`_again`):
    installed, at least :data:`~.auto_plans.HOME_MIN_SPP` spp: an MRT image
    where the scene's kind says it wins (:mod:`.auto_plans`), kept where its
    held-out check (:mod:`.held_out`) finds it near a full render's quality,
-   else the passes render the image after it.
+   else the passes render the image after it.  Without OIDN, under the
+   default target, on a scene with no environment map and no glass:
+   :data:`~.auto_plans.PLAIN`, checked the same way, else the full render;
+   with a ``noise_threshold``, the full render.
 3. Under a time limit (:mod:`.auto_limit`): an MRT plan that this process's
    renders of the scene kept, or :data:`~.auto_plans.HOME` where the grid
    probe says it ends in time; a *preview* (mode ``fast``, its grid
    denoised) where one pass and OIDN on the whole image would overrun it.
+   Without OIDN, :data:`~.auto_plans.PLAIN` where the probe says it ends in
+   time, on a scene of its kind.
 4. Otherwise the image in denoised passes (:mod:`.progressive`): each pass
    is part of the image, and the passes measure how good the denoised image
    gets, so planning costs little.  Under a time limit they fill it;
@@ -48,9 +53,10 @@ from ..recon.denoise import oidn_available
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from . import kept_plans
-from .auto_limit import (TIME_MARGIN, kept_cost, note_final_denoise, note_first_round,
-                         plan_memory_key, plan_within, remember_launches)
-from .auto_plans import HOME_MIN_SPP, AutoOutcome, Traced, find_surfaces, mrt_by_kind
+from .auto_limit import (TIME_MARGIN, kept_cost, mrt_within, note_final_denoise,
+                         note_first_round, plan_memory_key, plan_within, remember_launches)
+from .auto_plans import (HOME_MIN_SPP, PLAIN, PLAIN_REASON, AutoOutcome, Traced, find_surfaces,
+                         mrt_by_kind, plain_plan)
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
 from .replay import recordings, token
@@ -69,6 +75,8 @@ CHECK_AFTER_ROUNDS = 3
 #: The plan's note where OIDN is not installed.
 NO_OIDN_NOTE = ("Intel Open Image Denoise is not installed (pip install mitsuba-oidn): "
                 "the plan considers no denoising")
+#: The plan's reason where OIDN is not installed and nothing else is to gain.
+NO_DENOISER_REASON = "no denoiser: the full render"
 #: Why passes under a noise threshold stopped to let the planner weigh them.
 STOPPED_REASON = "more passes would cost more than a full render"
 #: Under a time limit the passes may take up to this many times the scene's spp.
@@ -139,9 +147,7 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     denoise = oidn_available()
     notes = [] if denoise else [NO_OIDN_NOTE]
     if not denoise and params.time_limit is None:
-        return AutoOutcome(Plan(Candidate("full", "full", tracer.spp),
-                                "no denoiser: the full render",
-                                target_error=params.noise_threshold, notes=notes))
+        return _undenoised(scene, pattern, tracer, params, notes, escape)
     key = scene_key(scene, tracer, pattern.width * pattern.height)
     job = _Job(scene, pattern, tracer, params, started, key,
                key + plan_key(tracer, params), notes, denoise)
@@ -152,6 +158,8 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     elif params.time_limit is not None and denoise:
         outcome, traced, surfaces, found = plan_within(
             scene, pattern, tracer, params, started, key, job.kept_key, notes, escape)
+    elif params.time_limit is not None and escape:
+        outcome, traced = _plain_within(job)
     if outcome is not None:
         return outcome
     if denoise and not found:
@@ -171,14 +179,58 @@ def _by_default(job: _Job, on_round) -> tuple[AutoOutcome | None, Traced]:
     if outcome is not None:
         return outcome, Traced()
     probe_start = time.perf_counter()
-    if not surely_noisy(scene, tracer.integrator) and noise_free(tracer, width, height):
-        return AutoOutcome(Plan(Candidate("full", "full", tracer.spp, error=0.0),
-                                "noise-free: the full render is exact", target_error=0.0,
-                                pilot_s=time.perf_counter() - probe_start,
-                                notes=job.notes)), Traced()
+    exact = _noise_free_plan(scene, tracer, width, height, job.notes, probe_start)
+    if exact is not None:
+        return exact, Traced()
     if tracer.spp >= HOME_MIN_SPP:
         return mrt_by_kind(scene, tracer, job.params, width, height, job.notes, probe_start)
     return None, Traced()
+
+
+def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
+    """Under a time limit without OIDN (and without a ``noise_threshold``,
+    at least :data:`~.auto_plans.HOME_MIN_SPP` spp, a scene of
+    :func:`~.auto_plans.plain_plan`'s kind): (:data:`~.auto_plans.PLAIN`'s
+    outcome where the grid probe says it ends in time
+    (:func:`~.auto_limit.mrt_within`), else None: the passes; what it traced
+    of every pixel)."""
+    scene, tracer, params = job.scene, job.tracer, job.params
+    if (params.noise_threshold is not None or tracer.spp < HOME_MIN_SPP
+            or not plain_plan(scene)):
+        return None, Traced()
+    outcome, traced, _ = mrt_within(scene, job.pattern, tracer, params, job.started, job.notes,
+                                    job.key, (PLAIN, PLAIN_REASON))
+    return outcome, traced
+
+
+def _noise_free_plan(scene, tracer, width: int, height: int, notes: list,
+                     probe_start: float) -> AutoOutcome | None:
+    """The full render where the scene is noise-free (:func:`noise_free`,
+    asked only where :func:`~.scene_query.surely_noisy` cannot tell), else None."""
+    if surely_noisy(scene, tracer.integrator) or not noise_free(tracer, width, height):
+        return None
+    return AutoOutcome(Plan(Candidate("full", "full", tracer.spp, error=0.0),
+                            "noise-free: the full render is exact", target_error=0.0,
+                            pilot_s=time.perf_counter() - probe_start, notes=notes))
+
+
+def _undenoised(scene, pattern: SamplePattern, tracer, params: MRTParams, notes: list,
+                escape: bool) -> AutoOutcome:
+    """Without OIDN and a time limit: under the default target (with
+    ``escape``, at least :data:`~.auto_plans.HOME_MIN_SPP` spp, a scene of
+    :func:`~.auto_plans.plain_plan`'s kind) :data:`~.auto_plans.PLAIN` at the
+    scene's spp, its image to be checked, or the full render where the scene
+    is noise-free; else the full render (``mi.render``'s own image)."""
+    if (escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP
+            and plain_plan(scene)):
+        begin = time.perf_counter()
+        exact = _noise_free_plan(scene, tracer, pattern.width, pattern.height, notes, begin)
+        if exact is not None:
+            return exact
+        return AutoOutcome(Plan(replace(PLAIN, spp=tracer.spp), PLAIN_REASON,
+                                pilot_s=time.perf_counter() - begin, notes=notes), check=True)
+    return AutoOutcome(Plan(Candidate("full", "full", tracer.spp), NO_DENOISER_REASON,
+                            target_error=params.noise_threshold, notes=notes))
 
 
 def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
@@ -202,7 +254,7 @@ def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
         target_error=params.noise_threshold, deadline=deadline, max_spp=max_spp,
         full_spp=spp, area=effective_area(tracer.sensor.film().rfilter()), denoise=denoise,
         stop_early=weighing if escape else None, on_round=on_round, surfaces=surfaces,
-        cost=kept_cost(job.key, tracer))
+        cost=kept_cost(job.key, tracer, denoise))
     remember_launches(job.key, tracer)
     if image is None:
         return AutoOutcome(weighing.plan)

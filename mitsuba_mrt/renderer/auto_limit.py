@@ -241,13 +241,14 @@ def plan_within(scene, pattern: SamplePattern, tracer, params: MRTParams, starte
     return outcome, traced, surfaces, found
 
 
-def kept_cost(key: tuple, tracer) -> LaunchCost:
+def kept_cost(key: tuple, tracer, guides: bool = True) -> LaunchCost:
     """The launches kept for ``key`` (where there are none, those an earlier
     process remembered, :func:`remember_launches`, else none, of
     ``tracer``'s sampler), now the most recently used of :data:`_launch_costs`;
     launches of 1 and 2 spp among its :attr:`~.launch_cost.LaunchCost.replays`
-    where another trace recorded their layout (a full render denoised), and
-    where the sampler bakes its spp, :func:`launch_ladder`'s."""
+    where another trace recorded their layout (a full render denoised; with
+    the ``guides`` or, for passes not to be denoised, without), and where
+    the sampler bakes its spp, :func:`launch_ladder`'s."""
     cost = _launch_costs.get(key)
     if cost is None:
         sampler = tracer.sensor.sampler()
@@ -256,7 +257,7 @@ def kept_cost(key: tuple, tracer) -> LaunchCost:
         cost = LaunchCost.from_memory(recalled, bakes) or LaunchCost(spp_compiles=bakes)
         cost.ladder = launch_ladder(sampler) if bakes else frozenset()
     cost = _keep(_launch_costs, key, cost)
-    cost.replays = frozenset(spp for spp in (1, 2) if tracer.pass_recorded(spp))
+    cost.replays = frozenset(spp for spp in (1, 2) if tracer.pass_recorded(spp, guides))
     return cost
 
 
@@ -398,11 +399,14 @@ def measured_within(key: tuple, started: float, limit: float, notes: list,
 
 
 def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,
-                notes: list, key: tuple) -> tuple[AutoOutcome | None, Traced, _Probe | None]:
+                notes: list, key: tuple, chosen: tuple | None = None
+                ) -> tuple[AutoOutcome | None, Traced, _Probe | None]:
     """Under a time limit: (:data:`HOME`'s outcome where the scene's kind
-    points to it (:func:`unmeasured_plan`) and it is expected to end within
-    :data:`TIME_MARGIN` of the limit, else None; what it traced of every
-    pixel (:class:`Traced`); the grid probe where it was made).
+    points to it (:func:`unmeasured_plan`), or ``chosen``'s (a plan of mode
+    ``idpass`` and its reason: without OIDN, :data:`~.auto_plans.PLAIN`),
+    and it is expected to end within :data:`TIME_MARGIN` of the limit, else
+    None; what it traced of every pixel (:class:`Traced`); the grid probe
+    where it was made).
 
     The grid probe's kernel time tells the plan's traces (the grid at the
     scene's spp: :data:`GRID_OVER_PROBE`; the id pass, traced only where
@@ -420,8 +424,8 @@ def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started
     cannot end within the limit, no probe is traced.
     """
     width, height = pattern.width, pattern.height
-    chosen = unmeasured_plan(scene, width * height)
-    if chosen is None or chosen[0] is not HOME:
+    chosen = chosen or unmeasured_plan(scene, width * height)
+    if chosen is None or chosen[0].mode != HOME.mode:
         return None, Traced(), None
     end = started + TIME_MARGIN * params.time_limit
 

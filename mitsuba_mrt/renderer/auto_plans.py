@@ -5,7 +5,8 @@ the scene's kind (its lights, surfaces and the image's size) and points to
 :data:`HOME` (mode ``idpass``, its grid denoised) or :data:`SKY` (mode
 ``refine``, its grid denoised), or to neither (the passes);
 :func:`mrt_by_kind` makes that plan, its image to be checked
-(:func:`keeps`).  :class:`AutoOutcome` is what every path of
+(:func:`keeps`).  Without OIDN the plan is :data:`PLAIN` (mode ``idpass``,
+undenoised), checked too.  :class:`AutoOutcome` is what every path of
 :func:`~.auto.run_auto` returns.
 """
 
@@ -89,9 +90,21 @@ SMALL_EDGE_SHARE = 0.027
 #: ``envmap_objects``, ``materials`` and ``cornell``).
 SKY = Candidate("refine+oidn", "mrt", 0, mode="refine", denoise=True)
 SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid"
-#: :data:`HOME`'s and :data:`SKY`'s image is kept where its held-out check estimates its RMS
-#: error at most this many times a full render's noise (the default target);
-#: else the passes render the image.  The RMS error weighs the MRT's few
+#: The plan under the default target where OIDN is not installed, on scenes
+#: lit by no environment map where no surface transmits light
+#: (:func:`plain_plan`): mode ``idpass`` at the scene's spp, undenoised.  Its
+#: id pass gives every pixel its surface and texture, its grid (smoothed
+#: within its noise) the shading between; a full render at as few spp as fit
+#: its time is far noisier (``bench rival --no-oidn``).  Through glass, or
+#: under an environment's light, its error is twice a full render's noise
+#: and more, which its check finds after it has cost a fifth of a full render.
+PLAIN = Candidate("idpass", "mrt", 0, mode="idpass", denoise=False)
+PLAIN_REASON = ("no denoiser installed: the MRT's id pass, its grid smoothed within the "
+                "noise")
+#: :data:`HOME`'s, :data:`SKY`'s and :data:`PLAIN`'s image is kept where its
+#: held-out check estimates its RMS error at most this many times a full
+#: render's noise (the default target); else the passes (without OIDN, the
+#: full render) render the image.  The RMS error weighs the MRT's few
 #: pixels at edges more than the report's mean absolute error does, so an
 #: image that meets the target by the report's metric may have an RMS error
 #: above the noise (``examples/held_out_check.py``).
@@ -152,6 +165,13 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
             and textured_diffuse_shapes(scene).any()):
         return HOME, TEXTURED_REASON
     return None
+
+
+def plain_plan(scene: mi.Scene) -> bool:
+    """Whether :data:`PLAIN` is the plan without OIDN: no environment map
+    (:func:`~.scene_query.environment_map`), nothing that transmits light
+    (:func:`~.scene_query.transmits`)."""
+    return not environment_map(scene) and not transmits(scene)
 
 
 def mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, notes: list,

@@ -123,6 +123,56 @@ def filter_reach(radius: float) -> int:
     return max(int(np.ceil(radius - 0.5 - 1e-9)), 0)
 
 
+#: Points per pixel at which :func:`pixel_weights` evaluates the filter
+#: (midpoints): the filters' curvature over a pixel is smooth.
+WEIGHT_POINTS = 64
+
+
+def pixel_weights(rfilter) -> np.ndarray:
+    """The weights (``2 reach + 1``, :func:`filter_reach`) with which
+    ``mi.render`` spreads the samples of a pixel, uniform over it, into the
+    pixels ``-reach ... reach`` from it along one axis: the filter's mean
+    over the pixel at each offset (a box filter's: ``[1.0]``)."""
+    radius = float(rfilter.radius())
+    reach = filter_reach(radius)
+    inside = (np.arange(WEIGHT_POINTS) + 0.5) / WEIGHT_POINTS - 0.5
+    return np.array([np.mean([float(np.asarray(rfilter.eval(float(d + u))).ravel()[0])
+                              for u in inside]) for d in range(-reach, reach + 1)])
+
+
+def through_filter(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``image`` (height, width, C), each pixel the mean of samples uniform
+    over it (a box filter), as ``mi.render`` develops such samples through
+    a film's filter of :func:`pixel_weights` ``weights``: each pixel's
+    value spread to the pixels around it with the weights along each axis,
+    every pixel divided by the weights it received (fewer at the image's
+    border, where no samples lie beyond).  The noise of a pixel's few
+    samples spreads as ``mi.render``'s does; on the gallery at 4 and 16 spp
+    the result is as close to the converged image as ``mi.render``'s.
+
+    Examples
+    --------
+    >>> weights = np.array([0.25, 0.5, 0.25])
+    >>> through_filter(np.full((3, 4, 1), 2.0), weights).ravel().tolist() == [2.0] * 12
+    True
+    >>> image = np.zeros((3, 3, 1)); image[1, 1] = 4.0
+    >>> through_filter(image, weights)[:, :, 0]
+    array([[0.44444444, 0.66666667, 0.44444444],
+           [0.66666667, 1.        , 0.66666667],
+           [0.44444444, 0.66666667, 0.44444444]])
+    """
+    from scipy import ndimage
+
+    if len(weights) == 1:  # (a box: its values, in an array of their own)
+        return np.array(image, dtype=np.float64)
+    out = np.asarray(image, dtype=np.float64)
+    norms = []
+    for axis in (0, 1):
+        out = ndimage.correlate1d(out, weights, axis=axis, mode="constant")
+        norms.append(ndimage.correlate1d(np.ones(image.shape[axis]), weights, mode="constant"))
+    return out / (norms[0][:, None, None] * norms[1][None, :, None])
+
+
 #: Tables already made, by the filter's description (its type and parameters).
 _TABLES: dict[str, FilterTable] = {}
 

@@ -64,6 +64,7 @@ from ..runtime.jit import kernel_seconds
 from ..types import SeedStream
 from .held_out import lanes_noise, noise_lanes, spread
 from .launch_cost import ROUND_SAFETY, LaunchCost
+from .pixel_filter import pixel_weights, through_filter
 from .replay import recording_seconds, recordings
 from .scene_query import sample_count_at_most, sampler_bakes_spp
 
@@ -599,7 +600,9 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     is a ``time.perf_counter()`` value.  ``stop_early(progress, pass_s)``,
     called after every round, may end the passes (return a reason).
     ``on_round(stage, done)`` hears of each round (``done``: spp over ``max_spp``).
-    Without ``denoise`` the image is the passes' mean.  Under a deadline, a
+    Without ``denoise`` the image is the passes' mean (no guides traced)
+    through the film's filter (:func:`~.pixel_filter.through_filter`: its
+    pixels' samples, box-filtered, spread as ``mi.render``'s).  Under a deadline, a
     sampler that compiles kernels per spp (:func:`.scene_query.sampler_bakes_spp`)
     launches the spp launched before and ``cost``'s ladder where they fit, as
     the default rounds launched them (a launch in one half, the guides
@@ -627,7 +630,7 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     round_size, oidn_s = _first_round(fixed, layout.estimates, deadline, target_error, cost,
                                       layout.exact, max_spp, full_spp, n,
                                       quality if denoise else None)
-    passes.guide_spp = (max_spp if deadline is not None and layout.bakes
+    passes.guide_spp = (0 if not denoise else max_spp if deadline is not None and layout.bakes
                         else max(GUIDE_PASSES, round_size))
     while True:
         begin = time.perf_counter()
@@ -674,10 +677,14 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
         round_size = next_size
         if not layout.bakes and target is not None and progress.history:
             round_size = to_target(progress.history, target, passes.count, next_size)
-    image = (_final_denoise(passes, progress, final, deadline, oidn_s, (height, width, 3))
-             if denoise else passes.mean)
-    return (image.reshape(height, width, 3),
-            (passes.alpha / passes.count).reshape(height, width), progress)
+    alpha = (passes.alpha / passes.count).reshape(height, width)
+    if denoise:
+        image = _final_denoise(passes, progress, final, deadline, oidn_s, (height, width, 3))
+        return image.reshape(height, width, 3), alpha, progress
+    # the passes' mean, each pixel's own samples', through the film's filter as mi.render's
+    weights = pixel_weights(tracer.sensor.film().rfilter())
+    return (through_filter(passes.mean.reshape(height, width, 3), weights),
+            through_filter(alpha[..., None], weights)[..., 0], progress)
 
 
 def _noise_due(passes: Passes, xy: np.ndarray, full_spp: int) -> None:

@@ -28,6 +28,12 @@ from helpers import ball_scene_xml as scene_xml
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def box_film():
+    """A fake tracer's film: a box pixel filter (the passes' mean is the image)."""
+    return SimpleNamespace(rfilter=lambda: SimpleNamespace(radius=lambda: 0.5,
+                                                           eval=lambda x: 1.0))
+
+
 def test_by_default_the_passes_stop_at_half_the_scenes_spp(variant, monkeypatch):
     # the round to the scene's spp would cost a full render, the rounds before included
     from mitsuba_mrt.renderer import progressive
@@ -835,8 +841,9 @@ def test_under_a_time_limit_textures_go_unshaded_where_only_plain_oidn_fits(monk
     assert not auto_limit._preview_due(1.0, 0.88, 100, "fast")
     assert auto_limit._preview_due(1.0, 0.88, 100, "fast", shading=True)
     key = ("scene", 100)
-    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
-                             pass_recorded=lambda spp: False)
+    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]",
+                                                    film=box_film),
+                             pass_recorded=lambda spp, *_: False)
     pattern = SimpleNamespace(width=10, height=10)
     params = MRTParams(time_limit=1.0)
     started = __import__("time").perf_counter()
@@ -869,15 +876,16 @@ def test_a_replayed_probe_counts_the_passes_first_recording_until_they_have_laun
     # a recording that compiled a kernel keeps its time less the compilation
     assert auto_limit._passes_recording_s(key, probe(True, 0.330, compile=0.300)) == 0.0
     assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == pytest.approx(0.026)
-    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]"),
-                             pass_recorded=lambda spp: False)
+    tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: "IndependentSampler[]",
+                                                    film=box_film),
+                             pass_recorded=lambda spp, *_: False)
     auto_limit.kept_cost(key, tracer).add(1, 0.02, recorded=True)
     assert auto_limit._passes_recording_s(key, probe(False, 0.004)) == 0.0  # (they replay now)
     # another trace (a full render denoised at 1 spp) recorded the passes' first launch
     other = ("scene 2",) + key[1:]
     assert auto_limit._passes_recording_s(other, probe(True, 0.030)) == 0.0
     assert auto_limit._passes_recording_s(other, probe(False, 0.004)) == pytest.approx(0.026)
-    recorded = SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp: spp == 1)
+    recorded = SimpleNamespace(sensor=tracer.sensor, pass_recorded=lambda spp, *_: spp == 1)
     auto_limit.kept_cost(other, recorded)
     assert auto_limit._passes_recording_s(other, probe(False, 0.004)) == 0.0
 
@@ -1071,11 +1079,85 @@ def test_a_time_limit_is_filled_with_passes(scene):
 
 def test_without_oidn_auto_renders_in_full_or_in_plain_passes(scene, monkeypatch):
     monkeypatch.setattr(auto, "oidn_available", lambda: False)
-    result = mitsuba_mrt.render(scene)
+    result = mitsuba_mrt.render(scene)  # (8 spp: too few for the MRT's plan)
     assert result.mode_used == "full" and "no denoiser" in result.auto.reason
     assert any("Open Image Denoise is not installed" in note for note in result.auto.notes)
+    assert np.array_equal(result.image, mitsuba_mrt.render_reference(scene)[0])
     limited = mitsuba_mrt.render(scene, time_limit=1e-6)
     assert limited.mode_used == "passes" and limited.timings.denoise == 0
+
+
+def test_without_oidn_the_default_is_the_checked_id_pass_where_nothing_transmits(variant):
+    from mitsuba_mrt.recon.denoise import hidden
+
+    scene = mi.load_string(scene_xml(384, spp=16))
+    with hidden():
+        result = mitsuba_mrt.render(scene)
+    plan = result.auto
+    assert result.mode_used == "idpass" and result.params.denoise == "none"
+    assert plan.choice.label == "idpass @ 16 spp" and plan.reason == auto_plans.PLAIN_REASON
+    assert plan.choice.error is not None and plan.target_error is not None  # (its check)
+    assert plan.choice.error <= auto_plans.CHECK_SLACK * plan.target_error
+    assert any("Open Image Denoise is not installed" in note for note in plan.notes)
+    assert not kept_plans._plans  # (checked each time: a process with OIDN plans anew)
+    truth = mitsuba_mrt.render_reference(scene, spp=256)[0]
+    full = mitsuba_mrt.render_reference(scene, spp=4)[0]  # (a quarter of the samples)
+    assert np.mean(np.abs(result.image - truth)) < np.mean(np.abs(full - truth))
+
+
+def test_without_oidn_glass_or_a_missed_check_give_the_full_render(variant, monkeypatch):
+    from mitsuba_mrt.recon.denoise import hidden
+
+    glass = mi.load_string(scene_xml(384, spp=16).replace(
+        '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf>',
+        '<bsdf type="dielectric"/>'))
+    with hidden():
+        result = mitsuba_mrt.render(glass)
+    assert result.mode_used == "full" and result.auto.reason == auto.NO_DENOISER_REASON
+    assert np.array_equal(result.image, mitsuba_mrt.render_reference(glass)[0])
+    monkeypatch.setattr(auto_plans, "CHECK_SLACK", -1.0)  # no estimate is kept
+    scene = mi.load_string(scene_xml(384, spp=16))
+    with hidden():
+        missed = mitsuba_mrt.render(scene)
+    assert missed.mode_used == "full" and missed.auto.reason.startswith("idpass missed its check")
+    assert [c.name for c in missed.auto.candidates] == ["idpass"]
+    assert np.array_equal(missed.image, mitsuba_mrt.render_reference(scene)[0])
+    # the MRT's image and its check are counted as the plan's, within the total
+    assert 0 < missed.timings.check and missed.timings.full_render > 0
+    assert missed.timings.check + missed.timings.full_render <= missed.timings.total + 1e-9
+
+
+def test_without_oidn_a_time_limit_takes_the_id_pass_where_it_fits(variant):
+    from mitsuba_mrt.recon.denoise import hidden
+
+    scene = mi.load_string(scene_xml(384, spp=16))
+    with hidden():
+        mitsuba_mrt.render(scene, time_limit=100.0)  # (its traces recorded, as a user's next)
+        result = mitsuba_mrt.render(scene, time_limit=100.0)
+        short = mitsuba_mrt.render(scene, time_limit=1e-6)
+    assert result.mode_used == "idpass" and result.params.denoise == "none"
+    assert result.auto.reason == auto_limit.WITHIN_REASON.format(auto_plans.PLAIN_REASON)
+    assert short.mode_used == "passes" and short.timings.denoise == 0
+
+
+def test_undenoised_passes_are_developed_through_the_film_s_filter(variant, monkeypatch):
+    from mitsuba_mrt.recon.denoise import hidden
+    from mitsuba_mrt.renderer import progressive
+    from mitsuba_mrt.renderer.pixel_filter import pixel_weights
+
+    scene = mi.load_string(scene_xml(48, spp=4, rfilter="gaussian"))
+    weights = pixel_weights(scene.sensors()[0].film().rfilter())
+    assert len(weights) == 5 and weights[2] > weights[1] > weights[0] > 0  # (reach 2)
+    seen, real = [], progressive.through_filter
+
+    def spy(image, w):
+        seen.append(np.array_equal(w, weights))
+        return real(image, w)
+    monkeypatch.setattr(progressive, "through_filter", spy)
+    with hidden():
+        result = mitsuba_mrt.render(scene, time_limit=5.0)
+    assert result.mode_used == "passes" and seen == [True, True]  # the colour, the alpha
+    assert np.isfinite(result.image).all()
 
 
 def test_a_noise_threshold_is_met_by_the_passes(scene):
@@ -1254,7 +1336,7 @@ def timed_tracer(monkeypatch):
     @dataclass(frozen=True)
     class Tracer:
         spp: int = 1
-        sensor = SimpleNamespace(sampler=lambda: "IndependentSampler[]")
+        sensor = SimpleNamespace(sampler=lambda: "IndependentSampler[]", film=box_film)
 
         def __call__(self, xy, **_):
             launched.append(self.spp)
@@ -1330,8 +1412,8 @@ def test_the_ladder_is_the_squares_to_64_as_the_sampler_takes_them(monkeypatch):
     for kind, ladder in (("stratified", launched_ladder_of("stratified")),
                          ("independent", frozenset())):
         sampler = mi.load_dict({"type": kind})
-        tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: sampler),
-                                 pass_recorded=lambda spp: False)
+        tracer = SimpleNamespace(sensor=SimpleNamespace(sampler=lambda: sampler, film=box_film),
+                                 pass_recorded=lambda spp, *_: False)
         assert auto_limit.kept_cost((kind, "sensor", "integrator", 16), tracer).ladder == ladder
 
 
@@ -1421,7 +1503,7 @@ def test_a_launch_s_kernels_run_time_and_the_cost_s_first_launch_are_kept(scene,
     from mitsuba_mrt.renderer.replay import clear_recordings
 
     kept = launch_cost.LaunchCost(spp_compiles=False)
-    monkeypatch.setattr(auto, "kept_cost", lambda key, tracer: kept)
+    monkeypatch.setattr(auto, "kept_cost", lambda key, tracer, guides: kept)
     clear_recordings()  # (the first launch records its replay, and measures that)
     mitsuba_mrt.render(scene, time_limit=10.0)
     first, *rest = kept.launches
@@ -1472,7 +1554,7 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     stratified = mi.load_dict({"type": "stratified"})
 
     class Stratified(Tracer):
-        sensor = SimpleNamespace(sampler=lambda: stratified)
+        sensor = SimpleNamespace(sampler=lambda: stratified, film=box_film)
 
         def __call__(self, xy, **kwargs):
             kinds.append((kwargs["aovs"], kwargs["halves"]))
@@ -1488,9 +1570,9 @@ def test_under_a_time_limit_a_sampler_that_compiles_per_spp_launches_the_spp_it_
     # 30 / 1.15 s holds 9 spp launched before (10 s), not a new 25; then 20 s left
     # hold 9 again, 10 s 4 spp (5 s), and 5 s none
     assert launched == [9, 9, 4] and clock[0] <= 30.0
-    # each as the default rounds' launches were (their estimates have companion
-    # lanes of their own): no odd samples apart, the guides throughout
-    assert kinds == [(True, False)] * 3
+    # no odd samples apart (the default rounds' estimates have companion lanes
+    # of their own), and undenoised: no guides
+    assert kinds == [(False, False)] * 3
     # where only 1 spp was launched before, the time fills with 1-spp launches
     launched.clear()
     clock[0] = 0.0
@@ -1786,7 +1868,7 @@ def test_a_preview_taken_as_the_sampler_bakes_its_spp_says_so(variant, monkeypat
     assert cost(1) == math.inf and cost.cheapest() == 9
     auto_limit._first_round_s.clear()
     # (the first render's 1-spp launches recorded: as if they had not)
-    monkeypatch.setattr(GridTracer, "pass_recorded", lambda self, spp, **_: False)
+    monkeypatch.setattr(GridTracer, "pass_recorded", lambda self, spp, *_, **__: False)
     preview = mitsuba_mrt.render(scene, time_limit=1e-6)
     assert preview.auto.reason == auto_limit.PREVIEW_REASON
     assert auto_limit.BAKED_NOTE.format(cost.cheapest()) in preview.auto.notes

@@ -55,3 +55,31 @@ def test_a_box_filters_offsets_need_no_search_and_are_the_searched_ones_bit_for_
     direct = filter_offset(u, *args, None, len(table.pdf), table.radius).numpy()
     searched = filter_offset(u, *args, steps, len(table.pdf), table.radius).numpy()
     assert np.array_equal(direct, searched)
+
+
+@pytest.mark.parametrize("name", ["box", "tent", "gaussian", "lanczos"])
+def test_pixel_weights_are_the_filter_over_a_pixel_and_a_box_s_are_one(variant, name):
+    from mitsuba_mrt.renderer.pixel_filter import filter_reach, pixel_weights
+
+    rfilter = mi.load_dict({"type": name})
+    weights = pixel_weights(rfilter)
+    assert len(weights) == 2 * filter_reach(float(rfilter.radius())) + 1
+    assert np.allclose(weights, weights[::-1])  # (Mitsuba's filters are symmetric)
+    assert weights.argmax() == len(weights) // 2
+    if name == "box":
+        assert weights.tolist() == [1.0]
+    if name == "lanczos":  # a negative lobe
+        assert weights.min() < 0
+
+
+def test_through_filter_keeps_a_uniform_image_and_spreads_a_pixel_as_its_weights(variant):
+    from mitsuba_mrt.renderer.pixel_filter import pixel_weights, through_filter
+
+    weights = pixel_weights(mi.load_dict({"type": "gaussian"}))
+    assert np.allclose(through_filter(np.full((6, 7, 3), 0.3), weights), 0.3)
+    image = np.zeros((9, 9, 1))
+    image[4, 4] = 1.0
+    spread = through_filter(image, weights)[..., 0]
+    assert np.allclose(spread[2:7, 2:7], np.outer(weights, weights) / weights.sum() ** 2)
+    assert through_filter(image, np.array([1.0])) is not image  # (a box: the same values)
+    assert np.array_equal(through_filter(image, np.array([1.0])), image)
