@@ -281,9 +281,8 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
              params: MRTParams, start: float, recorded: Recorded, progress) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
-    check keeps it (:func:`.auto_plans.keeps`; then, for a denoised plan,
-    :mod:`.kept_plans` keeps what it took, less what recording its traces
-    took since ``recorded``); else
+    check keeps it (:func:`.auto_plans.keeps`; then :mod:`.kept_plans` keeps what
+    it took, less what recording its traces took since ``recorded``); else
     ``auto``'s denoised passes (without OIDN, the full render), the MRT's
     seconds and the check's counted as ``check``."""
     recording_s = recording_seconds() - recorded.seconds  # (the check's own left out)
@@ -296,12 +295,11 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
     if auto_plans.keeps(held):
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
-        if plan.choice.denoise:  # (a plan without OIDN is not taken again: it is checked)
-            key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
-            key += auto.plan_key(tracer, params)
-            kept_plans.note_checked(key, plan.choice, plan.reason,
-                                    result.timings.total - held.seconds, result.timings,
-                                    recording_s, auto_limit.plan_memory_key(key, tracer))
+        key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
+        key += auto.plan_key(tracer, params)
+        kept_plans.note_checked(key, plan.choice, plan.reason,
+                                result.timings.total - held.seconds, result.timings,
+                                recording_s, auto_limit.plan_memory_key(key, tracer))
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

@@ -53,14 +53,15 @@ from ..recon.denoise import oidn_available
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from . import kept_plans
-from .auto_limit import (TIME_MARGIN, kept_cost, mrt_within, note_final_denoise,
-                         note_first_round, plan_memory_key, plan_within, remember_launches)
+from .auto_limit import (TIME_MARGIN, kept_cost, measured_within, mrt_within,
+                         note_final_denoise, note_first_round, plan_memory_key, plan_within,
+                         remember_launches)
 from .auto_plans import (HOME_MIN_SPP, PLAIN, PLAIN_REASON, AutoOutcome, Traced, find_surfaces,
                          mrt_by_kind, plain_plan)
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
 from .replay import recordings, token
-from .scene_query import surely_noisy
+from .scene_query import sampler_bakes_spp, surely_noisy
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
 #: pilot: the pilot's own launches would cost more than any plan could save.
@@ -146,11 +147,11 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     """
     denoise = oidn_available()
     notes = [] if denoise else [NO_OIDN_NOTE]
-    if not denoise and params.time_limit is None:
-        return _undenoised(scene, pattern, tracer, params, notes, escape)
     key = scene_key(scene, tracer, pattern.width * pattern.height)
     job = _Job(scene, pattern, tracer, params, started, key,
                key + plan_key(tracer, params), notes, denoise)
+    if not denoise and params.time_limit is None:
+        return _undenoised(job, escape)
     default = params.time_limit is None and params.noise_threshold is None
     outcome, traced, surfaces, found = None, Traced(), None, False
     if escape and default:  # (OIDN is installed)
@@ -191,13 +192,19 @@ def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
     """Under a time limit without OIDN (and without a ``noise_threshold``,
     at least :data:`~.auto_plans.HOME_MIN_SPP` spp, a scene of
     :func:`~.auto_plans.plain_plan`'s kind): (:data:`~.auto_plans.PLAIN`'s
-    outcome where the grid probe says it ends in time
-    (:func:`~.auto_limit.mrt_within`), else None: the passes; what it traced
-    of every pixel)."""
+    outcome where a default render of the scene kept it and measured it
+    within the limit (:func:`~.auto_limit.measured_within`), or the grid
+    probe says it ends in time (:func:`~.auto_limit.mrt_within`), else None:
+    the passes; what it traced of every pixel)."""
     scene, tracer, params = job.scene, job.tracer, job.params
     if (params.noise_threshold is not None or tracer.spp < HOME_MIN_SPP
             or not plain_plan(scene)):
         return None, Traced()
+    outcome = measured_within(job.kept_key, job.started, params.time_limit, job.notes,
+                              sampler_bakes_spp(tracer.sensor.sampler()),
+                              job.pattern.width * job.pattern.height, params)
+    if outcome is not None:
+        return outcome, Traced()
     outcome, traced, _ = mrt_within(scene, job.pattern, tracer, params, job.started, job.notes,
                                     job.key, (PLAIN, PLAIN_REASON))
     return outcome, traced
@@ -214,17 +221,22 @@ def _noise_free_plan(scene, tracer, width: int, height: int, notes: list,
                             pilot_s=time.perf_counter() - probe_start, notes=notes))
 
 
-def _undenoised(scene, pattern: SamplePattern, tracer, params: MRTParams, notes: list,
-                escape: bool) -> AutoOutcome:
+def _undenoised(job: _Job, escape: bool) -> AutoOutcome:
     """Without OIDN and a time limit: under the default target (with
     ``escape``, at least :data:`~.auto_plans.HOME_MIN_SPP` spp, a scene of
-    :func:`~.auto_plans.plain_plan`'s kind) :data:`~.auto_plans.PLAIN` at the
-    scene's spp, its image to be checked, or the full render where the scene
-    is noise-free; else the full render (``mi.render``'s own image)."""
+    :func:`~.auto_plans.plain_plan`'s kind) the plan an earlier render kept
+    (:func:`_again`), else :data:`~.auto_plans.PLAIN` at the scene's spp, its
+    image to be checked, or the full render where the scene is noise-free;
+    else the full render (``mi.render``'s own image)."""
+    scene, tracer, params, notes = job.scene, job.tracer, job.params, job.notes
+    width, height = job.pattern.width, job.pattern.height
     if (escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP
             and plain_plan(scene)):
+        again = _again(scene, tracer, job.key, job.kept_key, width, height, notes, None)
+        if again is not None:
+            return again
         begin = time.perf_counter()
-        exact = _noise_free_plan(scene, tracer, pattern.width, pattern.height, notes, begin)
+        exact = _noise_free_plan(scene, tracer, width, height, notes, begin)
         if exact is not None:
             return exact
         return AutoOutcome(Plan(replace(PLAIN, spp=tracer.spp), PLAIN_REASON,
@@ -368,8 +380,9 @@ def scene_key(scene: mi.Scene, tracer, pixels: int) -> tuple:
 
 def plan_key(tracer, params: MRTParams) -> tuple:
     """What a kept plan's key (:mod:`.kept_plans`) adds to :func:`scene_key`'s:
-    the spp and the parameters but the time limit and quality target."""
-    return tracer.spp, replace(params, time_limit=None, noise_threshold=None)
+    the spp, the parameters but the time limit and quality target, and
+    whether OIDN is installed (a plan made without it is not one with it)."""
+    return tracer.spp, replace(params, time_limit=None, noise_threshold=None), oidn_available()
 
 
 def noise_free(tracer, width: int, height: int) -> bool:

@@ -1099,10 +1099,17 @@ def test_without_oidn_the_default_is_the_checked_id_pass_where_nothing_transmits
     assert plan.choice.error is not None and plan.target_error is not None  # (its check)
     assert plan.choice.error <= auto_plans.CHECK_SLACK * plan.target_error
     assert any("Open Image Denoise is not installed" in note for note in plan.notes)
-    assert not kept_plans._plans  # (checked each time: a process with OIDN plans anew)
     truth = mitsuba_mrt.render_reference(scene, spp=256)[0]
     full = mitsuba_mrt.render_reference(scene, spp=4)[0]  # (a quarter of the samples)
     assert np.mean(np.abs(result.image - truth)) < np.mean(np.abs(full - truth))
+    # kept: the next render without OIDN takes it unchecked, one with OIDN plans anew
+    (kept,) = kept_plans._plans.values()
+    assert kept.choice.label == "idpass @ 16 spp"
+    with hidden():
+        again = mitsuba_mrt.render(scene)
+    assert again.mode_used == "idpass" and again.auto.reason == auto.AGAIN_REASON.format(
+        auto_plans.PLAIN_REASON) and again.timings.check == 0
+    assert mitsuba_mrt.render(scene).auto.choice.denoise
 
 
 def test_without_oidn_glass_or_a_missed_check_give_the_full_render(variant, monkeypatch):
