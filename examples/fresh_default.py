@@ -62,6 +62,9 @@ if method == "full":
 elif method == "auto":
     result = mitsuba_mrt.render(scene)
     image, used, chose = result.image, result.mode_used, result.auto.choice.label
+elif method.startswith("plain@"):  # (the full render at fewer spp: no OIDN)
+    image = mitsuba_mrt.render_reference(scene, spp=int(method.split("@")[1]))[0]
+    used, chose = "full", method
 else:
     quality, spp = method.split("@")
     image = mitsuba_mrt.render_denoised(scene, spp=int(spp), quality=quality)[0]

@@ -3,6 +3,7 @@
     python examples/fresh_time_limit.py [SCENE ...] [--res 512] [--cold-cache] [--errors]
     python examples/fresh_time_limit.py --res 512 --errors \
         --truths docs/bench/rival512/cache --truth-spp 1024
+    python examples/fresh_time_limit.py --errors --no-oidn
 
 Per gallery scene (all nine by default) at ``--res`` a side (256 by default): the full render in three fresh processes
 (median), then one fresh process per limit of 0.1, 0.25 and 0.5 of it, each
@@ -30,6 +31,10 @@ scene, each rung in a fresh process too: printed besides, the image's error
 (the report's metric, against the converged renders ``bench rival`` keeps in
 ``--truths`` at ``--truth-spp``) over the lowest of the rungs that ended
 within the limit.
+
+With ``--no-oidn`` every child renders as a process without OIDN installed
+does (:func:`mitsuba_mrt.recon.denoise.hidden`), and the alternative's
+ladder is the full render at 1-32 spp through the film's filter.
 """
 
 import argparse
@@ -59,9 +64,11 @@ scene = mitsuba_mrt.load_scene(sys.argv[1], **defines)  # (crop_rgba's film hold
 if sys.argv[2] == "full":
     print(json.dumps({"seconds": mitsuba_mrt.render_reference(scene)[1], "chose": "full"}))
 else:
-    begin = time.perf_counter()
-    result = mitsuba_mrt.render(scene, time_limit=float(sys.argv[2]))
-    seconds = time.perf_counter() - begin
+    from mitsuba_mrt.recon.denoise import hidden
+    with hidden(sys.argv[5] == "no-oidn"):
+        begin = time.perf_counter()
+        result = mitsuba_mrt.render(scene, time_limit=float(sys.argv[2]))
+        seconds = time.perf_counter() - begin
     if sys.argv[4] != "-":
         import numpy as np
         np.save(sys.argv[4], np.asarray(result.image, dtype=np.float32)[..., :3])
@@ -71,9 +78,11 @@ else:
 
 
 def _child(path: Path, limit: str, res: int, cold: bool = False, image: str = "-",
-           memory: str = "off") -> dict:
-    """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``)."""
+           memory: str = "off", oidn: bool = True) -> dict:
+    """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``;
+    without ``oidn``, as without OIDN installed)."""
     return fresh_child(CHILD, str(path), limit, str(res), image,
+                       "oidn" if oidn else "no-oidn",
                        what=f"{path.name} under limit {limit}", memory=memory, cold=cold)
 
 
@@ -85,6 +94,9 @@ def main():
                         help="each limit's process with an empty kernel cache")
     parser.add_argument("--errors", action="store_true",
                         help="also each image's error over the alternative's best within the limit")
+    parser.add_argument("--no-oidn", action="store_true",
+                        help="render as without OIDN installed (the alternative: the full render "
+                             "at fewer spp)")
     add_truth_spp(parser)
     add_truths(parser)
     args = parser.parse_args()
@@ -93,15 +105,15 @@ def main():
     for name in args.scenes or GALLERY_SCENES:
         path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
         full = statistics.median(_child(path, "full", args.res)["seconds"] for _ in range(3))
-        errors = (_Errors(path, name, args.res, Path(args.truths), args.truth_spp)
-                  if args.errors else None)
+        errors = (_Errors(path, name, args.res, Path(args.truths), args.truth_spp,
+                          not args.no_oidn) if args.errors else None)
         for share in LIMITS:
             with tempfile.TemporaryDirectory() as folder:
                 image = os.path.join(folder, "image.npy") if errors else "-"
                 remembered = os.path.join(folder, "memory.json")
                 for render in ("first", "again"):
                     run = _child(path, str(share * full), args.res, args.cold_cache, image,
-                                 remembered)
+                                 remembered, not args.no_oidn)
                     error = "" if errors is None else errors.line(run, image, share * full)
                     print(f"{name}: full {full:.3f} s; limit {share}, {render}: "
                           f"{run['seconds'] / (share * full):.2f}x the limit{error} "
@@ -110,9 +122,11 @@ def main():
 
 class _Errors:
     """``--errors``: a scene's converged renders and the alternative's ladder,
-    each rung rendered once in a fresh process (:mod:`fresh_default`'s child)."""
+    each rung rendered once in a fresh process (:mod:`fresh_default`'s child);
+    without ``oidn``, the full render's ladder."""
 
-    def __init__(self, path: Path, name: str, res: int, truths: Path, truth_spp: int):
+    def __init__(self, path: Path, name: str, res: int, truths: Path, truth_spp: int,
+                 oidn: bool = True):
         import mitsuba_mrt
         from fresh_default import LADDER, _child as ladder_child
         from mitsuba_mrt.bench.experiments import gallery_defines
@@ -125,10 +139,11 @@ class _Errors:
         self.truth = kept_truth(scene, name, truths, truth_spp)
         self.rungs = []  # (seconds, error)
         with tempfile.TemporaryDirectory() as folder:
-            for quality in ("fast", "high"):
+            for quality in (("fast", "high") if oidn else ("plain",)):
                 for spp in LADDER:
                     report, image = ladder_child(path, f"{quality}@{spp}", defines, folder)
-                    self.rungs.append((report["seconds"], paper_error(image, self.truth["box"])))
+                    kind = "box" if report["used"] == "full+oidn" else "film"
+                    self.rungs.append((report["seconds"], paper_error(image, self.truth[kind])))
 
     def line(self, run: dict, image: str, limit: float) -> str:
         """`, error E x the alternative's best within the limit`."""
