@@ -18,7 +18,7 @@ def fresh_child(program: str, *args: str, what: str, memory: str | None = "off",
     ``MITSUBA_MRT_MEMORY`` (None: this process's); ``cold``: an empty
     ``HOME``, so that Dr.Jit's kernel cache starts empty.  Where the child
     fails, this process exits with one line naming ``what`` and the child's
-    last line of error.
+    last line of error (or printed no JSON line).
     """
     env = dict(os.environ)
     if memory is not None:
@@ -33,4 +33,13 @@ def fresh_child(program: str, *args: str, what: str, memory: str | None = "off",
         lines = out.stderr.strip().splitlines() or [f"exit status {out.returncode}"]
         print(f"error: {what} failed: {lines[-1]}", file=sys.stderr)
         sys.exit(2)
-    return json.loads(out.stdout.strip().splitlines()[-1])
+    # its figures: the last JSON object on a line (Mitsuba's coloured log may
+    # share the line, its colour's reset before the object)
+    for line in reversed(out.stdout.strip().splitlines()):
+        if "{" in line:
+            try:
+                return json.loads(line[line.index("{"):])
+            except ValueError:
+                continue
+    print(f"error: {what} printed no figures", file=sys.stderr)
+    sys.exit(2)
