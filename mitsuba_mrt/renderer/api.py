@@ -283,8 +283,9 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
     check keeps it (:func:`.auto_plans.keeps`; then :mod:`.kept_plans` keeps what
     it took, less what recording its traces took since ``recorded``); else
-    ``auto``'s denoised passes (without OIDN, the full render), the MRT's
-    seconds and the check's counted as ``check``."""
+    ``auto``'s denoised passes (without OIDN, the full render, kept for the
+    scene's next renders), the MRT's seconds and the check's counted as
+    ``check``."""
     recording_s = recording_seconds() - recorded.seconds  # (the check's own left out)
     held = check_image(result.image, result.traced_mask, tracer,
                        effective_area(tracer.sensor.film().rfilter()))
@@ -292,11 +293,11 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
     plan.choice = replace(plan.choice, error=held.error)
     plan.target_error, plan.pilot_pixels = held.full_error, 2 * held.pixels
     plan.pilot_s += held.seconds
+    key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
+    key += auto.plan_key(tracer, params)
     if auto_plans.keeps(held):
         result.timings.check += held.seconds
         result.timings.close(time.perf_counter() - start)
-        key = auto.scene_key(scene, tracer, pattern.width * pattern.height)
-        key += auto.plan_key(tracer, params)
         kept_plans.note_checked(key, plan.choice, plan.reason,
                                 result.timings.total - held.seconds, result.timings,
                                 recording_s, auto_limit.plan_memory_key(key, tracer))
@@ -307,7 +308,9 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
                            f"a full render's {held.full_error:.4f}): {outcome.plan.reason}")
     outcome.plan.candidates = [plan.choice]
     outcome.plan.pilot_s += result.timings.total + held.seconds
-    if outcome.image is None:  # (no denoiser: the full render)
+    if outcome.image is None:  # (no denoiser: the full render, for the next renders too)
+        kept_plans.note_plan(key, outcome.plan.choice, outcome.plan.reason,
+                             auto_limit.plan_memory_key(key, tracer))
         return _full_result(tracer, params, outcome.plan, start)
     passes = _passes_result(outcome, tracer, params, start)
     passes.timings.check += result.timings.total + held.seconds

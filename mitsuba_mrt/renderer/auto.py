@@ -13,15 +13,16 @@ the check or the estimates that chose it: :func:`_again`):
    where the scene's kind says it wins (:mod:`.auto_plans`), kept where its
    held-out check (:mod:`.held_out`) finds it near a full render's quality,
    else the passes render the image after it.  Without OIDN, under the
-   default target, on a scene with no environment map and no glass:
-   :data:`~.auto_plans.PLAIN`, checked the same way, else the full render;
-   with a ``noise_threshold``, the full render.
+   default target: :func:`~.auto_plans.plain_plan`'s (``idpass``, or
+   ``refine`` through glass or under an environment map, undenoised),
+   checked the same way, else the full render, which the scene's next
+   renders then take; with a ``noise_threshold``, the full render.
 3. Under a time limit (:mod:`.auto_limit`): an MRT plan that this process's
    renders of the scene kept, or :data:`~.auto_plans.HOME` where the grid
    probe says it ends in time; a *preview* (mode ``fast``, its grid
    denoised) where one pass and OIDN on the whole image would overrun it.
-   Without OIDN, :data:`~.auto_plans.PLAIN` where the probe says it ends in
-   time, on a scene of its kind.
+   Without OIDN, the plan a default render kept, where it fits, or
+   :data:`~.auto_plans.PLAIN` where the probe says it ends in time.
 4. Otherwise the image in denoised passes (:mod:`.progressive`): each pass
    is part of the image, and the passes measure how good the denoised image
    gets, so planning costs little.  Under a time limit they fill it;
@@ -56,8 +57,8 @@ from . import kept_plans
 from .auto_limit import (TIME_MARGIN, kept_cost, measured_within, mrt_within,
                          note_final_denoise, note_first_round, plan_memory_key, plan_within,
                          remember_launches)
-from .auto_plans import (HOME_MIN_SPP, PLAIN, PLAIN_REASON, AutoOutcome, Traced, find_surfaces,
-                         mrt_by_kind, plain_plan)
+from .auto_plans import (HOME_MIN_SPP, PLAIN, AutoOutcome, Traced, find_surfaces, mrt_by_kind,
+                         plain_plan)
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
 from .replay import recordings, token
@@ -190,23 +191,25 @@ def _by_default(job: _Job, on_round) -> tuple[AutoOutcome | None, Traced]:
 
 def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
     """Under a time limit without OIDN (and without a ``noise_threshold``,
-    at least :data:`~.auto_plans.HOME_MIN_SPP` spp, a scene of
-    :func:`~.auto_plans.plain_plan`'s kind): (:data:`~.auto_plans.PLAIN`'s
-    outcome where a default render of the scene kept it and measured it
-    within the limit (:func:`~.auto_limit.measured_within`), or the grid
-    probe says it ends in time (:func:`~.auto_limit.mrt_within`), else None:
-    the passes; what it traced of every pixel)."""
+    at least :data:`~.auto_plans.HOME_MIN_SPP` spp): (the MRT plan a default
+    render of the scene kept, where it measured it within the limit
+    (:func:`~.auto_limit.measured_within`), or :data:`~.auto_plans.PLAIN`'s
+    outcome, on a scene of its kind, where the grid probe says it ends in
+    time (:func:`~.auto_limit.mrt_within`), else None: the passes; what it
+    traced of every pixel)."""
     scene, tracer, params = job.scene, job.tracer, job.params
-    if (params.noise_threshold is not None or tracer.spp < HOME_MIN_SPP
-            or not plain_plan(scene)):
+    if params.noise_threshold is not None or tracer.spp < HOME_MIN_SPP:
         return None, Traced()
     outcome = measured_within(job.kept_key, job.started, params.time_limit, job.notes,
                               sampler_bakes_spp(tracer.sensor.sampler()),
                               job.pattern.width * job.pattern.height, params)
     if outcome is not None:
         return outcome, Traced()
+    chosen = plain_plan(scene)
+    if chosen[0] is not PLAIN:
+        return None, Traced()
     outcome, traced, _ = mrt_within(scene, job.pattern, tracer, params, job.started, job.notes,
-                                    job.key, (PLAIN, PLAIN_REASON))
+                                    job.key, chosen)
     return outcome, traced
 
 
@@ -223,15 +226,14 @@ def _noise_free_plan(scene, tracer, width: int, height: int, notes: list,
 
 def _undenoised(job: _Job, escape: bool) -> AutoOutcome:
     """Without OIDN and a time limit: under the default target (with
-    ``escape``, at least :data:`~.auto_plans.HOME_MIN_SPP` spp, a scene of
-    :func:`~.auto_plans.plain_plan`'s kind) the plan an earlier render kept
-    (:func:`_again`), else :data:`~.auto_plans.PLAIN` at the scene's spp, its
-    image to be checked, or the full render where the scene is noise-free;
-    else the full render (``mi.render``'s own image)."""
+    ``escape``, at least :data:`~.auto_plans.HOME_MIN_SPP` spp) the plan an
+    earlier render kept (:func:`_again`: the MRT's, or the full render its
+    image gave way to), else :func:`~.auto_plans.plain_plan`'s at the scene's
+    spp, its image to be checked, or the full render where the scene is
+    noise-free; else the full render (``mi.render``'s own image)."""
     scene, tracer, params, notes = job.scene, job.tracer, job.params, job.notes
     width, height = job.pattern.width, job.pattern.height
-    if (escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP
-            and plain_plan(scene)):
+    if escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP:
         again = _again(scene, tracer, job.key, job.kept_key, width, height, notes, None)
         if again is not None:
             return again
@@ -239,7 +241,8 @@ def _undenoised(job: _Job, escape: bool) -> AutoOutcome:
         exact = _noise_free_plan(scene, tracer, width, height, notes, begin)
         if exact is not None:
             return exact
-        return AutoOutcome(Plan(replace(PLAIN, spp=tracer.spp), PLAIN_REASON,
+        chosen, reason = plain_plan(scene)
+        return AutoOutcome(Plan(replace(chosen, spp=tracer.spp), reason,
                                 pilot_s=time.perf_counter() - begin, notes=notes), check=True)
     return AutoOutcome(Plan(Candidate("full", "full", tracer.spp), NO_DENOISER_REASON,
                             target_error=params.noise_threshold, notes=notes))
@@ -284,8 +287,8 @@ def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
                 passes=list(progress.history))
     if limit is None and params.noise_threshold is None and denoise:
         # (the next default render of the scene takes them again)
-        kept_plans.note_passes(job.kept_key, choice, plan.reason,
-                               plan_memory_key(job.kept_key, tracer))
+        kept_plans.note_plan(job.kept_key, choice, plan.reason,
+                             plan_memory_key(job.kept_key, tracer))
     if weighing.plan is not None:  # (the planner chose the passes, which went on)
         plan.reason, plan.candidates = weighing.plan.reason, weighing.plan.candidates
     return AutoOutcome(plan, image, alpha, progress, id_pass=traced.id_pass)
@@ -351,7 +354,8 @@ def _again(scene, tracer, key: tuple, kept_key: tuple, width: int, height: int,
     process kept, or one in an earlier process remembered
     (:func:`~.kept_plans.plan_again`), without the probes, the
     check or the estimates that chose it; an MRT plan to be rendered (its
-    time kept for ``kept_key``), the passes' image at their kept spp and
+    time kept for ``kept_key``), the full render (without OIDN, where the
+    MRT's image missed its check), the passes' image at their kept spp and
     preset (their launch kept for ``key``'s time-limited passes,
     :func:`kept_cost`); else None."""
     kept = kept_plans.plan_again(kept_key, plan_memory_key(kept_key, tracer))
@@ -362,6 +366,8 @@ def _again(scene, tracer, key: tuple, kept_key: tuple, width: int, height: int,
                 notes=notes)
     if choice.kind == "mrt":
         return AutoOutcome(plan, kept_key=kept_key)
+    if choice.kind == "full":  # (without OIDN, where the MRT's image missed its check)
+        return AutoOutcome(plan)
     surfaces = find_surfaces(scene, tracer, width, height) if choice.shading else None
     image, alpha, progress = run_passes(
         tracer, width, height, quality=choice.quality, target_error=None, deadline=None,

@@ -6,7 +6,7 @@ the scene's kind (its lights, surfaces and the image's size) and points to
 ``refine``, its grid denoised), or to neither (the passes);
 :func:`mrt_by_kind` makes that plan, its image to be checked
 (:func:`keeps`).  Without OIDN the plan is :data:`PLAIN` (mode ``idpass``,
-undenoised), checked too.  :class:`AutoOutcome` is what every path of
+undenoised) or :data:`PLAIN_EDGES` (``refine``), checked too (:func:`plain_plan`).  :class:`AutoOutcome` is what every path of
 :func:`~.auto.run_auto` returns.
 """
 
@@ -95,12 +95,18 @@ SKY_REASON = "an environment map's light: the MRT's refined edges, denoised grid
 #: (:func:`plain_plan`): mode ``idpass`` at the scene's spp, undenoised.  Its
 #: id pass gives every pixel its surface and texture, its grid (smoothed
 #: within its noise) the shading between; a full render at as few spp as fit
-#: its time is far noisier (``bench rival --no-oidn``).  Through glass, or
-#: under an environment's light, its error is twice a full render's noise
-#: and more, which its check finds after it has cost a fifth of a full render.
+#: its time is far noisier (``bench rival --no-oidn``).
 PLAIN = Candidate("idpass", "mrt", 0, mode="idpass", denoise=False)
 PLAIN_REASON = ("no denoiser installed: the MRT's id pass, its grid smoothed within the "
                 "noise")
+#: ... and through glass or under an environment map: mode ``refine``,
+#: undenoised, which traces the pixels whose light the grid cannot follow
+#: (the ids see one surface where glass shows the scene behind it, and the
+#: id pass's image there is twice a full render's noise and more, which
+#: its check finds after it has cost a fifth of a full render).
+PLAIN_EDGES = Candidate("refine", "mrt", 0, mode="refine", denoise=False)
+PLAIN_EDGES_REASON = ("no denoiser installed, glass or an environment map: the MRT's "
+                      "refined edges, its grid smoothed within the noise")
 #: :data:`HOME`'s, :data:`SKY`'s and :data:`PLAIN`'s image is kept where its
 #: held-out check estimates its RMS error at most this many times a full
 #: render's noise (the default target); else the passes (without OIDN, the
@@ -167,11 +173,14 @@ def unmeasured_plan(scene: mi.Scene, pixels: int) -> tuple[Candidate, str] | Non
     return None
 
 
-def plain_plan(scene: mi.Scene) -> bool:
-    """Whether :data:`PLAIN` is the plan without OIDN: no environment map
-    (:func:`~.scene_query.environment_map`), nothing that transmits light
-    (:func:`~.scene_query.transmits`)."""
-    return not environment_map(scene) and not transmits(scene)
+def plain_plan(scene: mi.Scene) -> tuple[Candidate, str]:
+    """The MRT plan without OIDN, and its reason: :data:`PLAIN` where no
+    environment map lights the scene (:func:`~.scene_query.environment_map`)
+    and nothing transmits light (:func:`~.scene_query.transmits`), else
+    :data:`PLAIN_EDGES`."""
+    if not environment_map(scene) and not transmits(scene):
+        return PLAIN, PLAIN_REASON
+    return PLAIN_EDGES, PLAIN_EDGES_REASON
 
 
 def mrt_by_kind(scene, tracer, params: MRTParams, width: int, height: int, notes: list,

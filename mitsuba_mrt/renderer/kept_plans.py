@@ -168,11 +168,12 @@ def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
     _remember(kept, memory_key)
 
 
-def note_passes(key: tuple, choice: Candidate, reason: str,
-                memory_key: str | None = None) -> None:
-    """Keep ``choice``, the denoised passes a default render of ``key`` ended
-    with (their spp, preset and shading), and its ``reason``; remembered
-    under ``memory_key`` (:func:`_remember`)."""
+def note_plan(key: tuple, choice: Candidate, reason: str,
+              memory_key: str | None = None) -> None:
+    """Keep ``choice``, the whole image's plan a default render of ``key``
+    ended with (the denoised passes, their spp, preset and shading; without
+    OIDN, the full render an MRT image that missed its check gave way to),
+    and its ``reason``; remembered under ``memory_key`` (:func:`_remember`)."""
     kept = keep(_plans, key, KeptPlan(replace(choice, seconds=None), reason), KEPT_PLANS)
     _remember(kept, memory_key)
 
