@@ -36,3 +36,17 @@ def no_kept_plans(monkeypatch):
     from mitsuba_mrt.renderer import kept_plans
 
     monkeypatch.setattr(kept_plans, "_plans", {})
+
+
+@pytest.fixture(autouse=True)
+def no_kept_times(monkeypatch):
+    """Every test starts with no time kept by another test's time-limited
+    renders (``auto_limit``'s tables: first rounds, OIDN's last calls, the
+    passes' launches, the grid probe, previews): a time limit plans from
+    them, so that a test's plan depended on which tests ran before it."""
+    from mitsuba_mrt.renderer import auto_limit
+
+    for name in ("_first_round_s", "_final_denoise_s", "_launch_costs", "_probe_recording_s",
+                 "_probe_execute", "_preview_after_s"):
+        monkeypatch.setattr(auto_limit, name, {})
+    monkeypatch.setattr(auto_limit, "_preview_rate", [])

@@ -132,12 +132,17 @@ def pixel_weights(rfilter) -> np.ndarray:
     """The weights (``2 reach + 1``, :func:`filter_reach`) with which
     ``mi.render`` spreads the samples of a pixel, uniform over it, into the
     pixels ``-reach ... reach`` from it along one axis: the filter's mean
-    over the pixel at each offset (a box filter's: ``[1.0]``)."""
-    radius = float(rfilter.radius())
-    reach = filter_reach(radius)
-    inside = (np.arange(WEIGHT_POINTS) + 0.5) / WEIGHT_POINTS - 0.5
-    return np.array([np.mean([float(np.asarray(rfilter.eval(float(d + u))).ravel()[0])
-                              for u in inside]) for d in range(-reach, reach + 1)])
+    over the pixel at each offset (a box filter's: ``[1.0]``); made once per
+    filter (:data:`_WEIGHTS`), read-only."""
+    key = str(rfilter)
+    if key not in _WEIGHTS:
+        reach = filter_reach(float(rfilter.radius()))
+        inside = (np.arange(WEIGHT_POINTS) + 0.5) / WEIGHT_POINTS - 0.5
+        weights = np.array([np.mean([float(np.asarray(rfilter.eval(float(d + u))).ravel()[0])
+                                     for u in inside]) for d in range(-reach, reach + 1)])
+        weights.flags.writeable = False
+        _WEIGHTS[key] = weights
+    return _WEIGHTS[key]
 
 
 def through_filter(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -175,6 +180,8 @@ def through_filter(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 #: Tables already made, by the filter's description (its type and parameters).
 _TABLES: dict[str, FilterTable] = {}
+#: :func:`pixel_weights` already made, by the same descriptions.
+_WEIGHTS: dict[str, np.ndarray] = {}
 
 
 def filter_table(rfilter) -> FilterTable:

@@ -630,8 +630,12 @@ def run_passes(tracer, width: int, height: int, *, quality: str,
     round_size, oidn_s = _first_round(fixed, layout.estimates, deadline, target_error, cost,
                                       layout.exact, max_spp, full_spp, n,
                                       quality if denoise else None)
-    passes.guide_spp = (0 if not denoise else max_spp if deadline is not None and layout.bakes
-                        else max(GUIDE_PASSES, round_size))
+    if not denoise:  # (no OIDN call: no guides)
+        passes.guide_spp = 0
+    elif deadline is not None and layout.bakes:
+        passes.guide_spp = max_spp
+    else:
+        passes.guide_spp = max(GUIDE_PASSES, round_size)
     while True:
         begin = time.perf_counter()
         # (a round's two halves serve the estimates alone)

@@ -39,6 +39,7 @@ def clear_caches() -> None:
     develop._BOX_FILTERS.clear()
     guides._integrators.clear()
     pixel_filter._TABLES.clear()
+    pixel_filter._WEIGHTS.clear()
     denoise.release()
     rbf_fast._tensor_weights.cache_clear()
     rbf_fast._near_table.cache_clear()
