@@ -151,11 +151,9 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
     key = scene_key(scene, tracer, pattern.width * pattern.height)
     job = _Job(scene, pattern, tracer, params, started, key,
                key + plan_key(tracer, params), notes, denoise)
-    if not denoise and params.time_limit is None:
-        return _undenoised(job, escape)
     default = params.time_limit is None and params.noise_threshold is None
     outcome, traced, surfaces, found = None, Traced(), None, False
-    if escape and default:  # (OIDN is installed)
+    if escape and default:
         outcome, traced = _by_default(job, on_round)
     elif params.time_limit is not None and denoise:
         outcome, traced, surfaces, found = plan_within(
@@ -164,6 +162,9 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
         outcome, traced = _plain_within(job)
     if outcome is not None:
         return outcome
+    if not denoise and params.time_limit is None:  # (``mi.render``'s own image)
+        return AutoOutcome(Plan(Candidate("full", "full", tracer.spp), NO_DENOISER_REASON,
+                                target_error=params.noise_threshold, notes=notes))
     if denoise and not found:
         surfaces = find_surfaces(scene, tracer, pattern.width, pattern.height,
                                  traced.shape_index())
@@ -173,8 +174,10 @@ def run_auto(scene: mi.Scene, pattern: SamplePattern, tracer, params: MRTParams,
 def _by_default(job: _Job, on_round) -> tuple[AutoOutcome | None, Traced]:
     """Under the default target: (the plan kept from an earlier render
     (:func:`_again`), the exact full render of a noise-free scene, or the
-    MRT plan the scene's kind points to (:func:`~.auto_plans.mrt_by_kind`),
-    else None: the passes; what was traced of every pixel)."""
+    MRT plan the scene's kind points to (:func:`~.auto_plans.mrt_by_kind`;
+    without OIDN, :func:`~.auto_plans.plain_plan`'s, its image to be
+    checked), else None: the passes, or without OIDN the full render; what
+    was traced of every pixel)."""
     scene, tracer = job.scene, job.tracer
     width, height = job.pattern.width, job.pattern.height
     outcome = _again(scene, tracer, job.key, job.kept_key, width, height, job.notes, on_round)
@@ -184,9 +187,13 @@ def _by_default(job: _Job, on_round) -> tuple[AutoOutcome | None, Traced]:
     exact = _noise_free_plan(scene, tracer, width, height, job.notes, probe_start)
     if exact is not None:
         return exact, Traced()
-    if tracer.spp >= HOME_MIN_SPP:
-        return mrt_by_kind(scene, tracer, job.params, width, height, job.notes, probe_start)
-    return None, Traced()
+    if tracer.spp < HOME_MIN_SPP:
+        return None, Traced()
+    if not job.denoise:
+        chosen, reason = plain_plan(scene)
+        return AutoOutcome(Plan(replace(chosen, spp=tracer.spp), reason, notes=job.notes,
+                                pilot_s=time.perf_counter() - probe_start), check=True), Traced()
+    return mrt_by_kind(scene, tracer, job.params, width, height, job.notes, probe_start)
 
 
 def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
@@ -222,30 +229,6 @@ def _noise_free_plan(scene, tracer, width: int, height: int, notes: list,
     return AutoOutcome(Plan(Candidate("full", "full", tracer.spp, error=0.0),
                             "noise-free: the full render is exact", target_error=0.0,
                             pilot_s=time.perf_counter() - probe_start, notes=notes))
-
-
-def _undenoised(job: _Job, escape: bool) -> AutoOutcome:
-    """Without OIDN and a time limit: under the default target (with
-    ``escape``, at least :data:`~.auto_plans.HOME_MIN_SPP` spp) the plan an
-    earlier render kept (:func:`_again`: the MRT's, or the full render its
-    image gave way to), else :func:`~.auto_plans.plain_plan`'s at the scene's
-    spp, its image to be checked, or the full render where the scene is
-    noise-free; else the full render (``mi.render``'s own image)."""
-    scene, tracer, params, notes = job.scene, job.tracer, job.params, job.notes
-    width, height = job.pattern.width, job.pattern.height
-    if escape and params.noise_threshold is None and tracer.spp >= HOME_MIN_SPP:
-        again = _again(scene, tracer, job.key, job.kept_key, width, height, notes, None)
-        if again is not None:
-            return again
-        begin = time.perf_counter()
-        exact = _noise_free_plan(scene, tracer, width, height, notes, begin)
-        if exact is not None:
-            return exact
-        chosen, reason = plain_plan(scene)
-        return AutoOutcome(Plan(replace(chosen, spp=tracer.spp), reason,
-                                pilot_s=time.perf_counter() - begin, notes=notes), check=True)
-    return AutoOutcome(Plan(Candidate("full", "full", tracer.spp), NO_DENOISER_REASON,
-                            target_error=params.noise_threshold, notes=notes))
 
 
 def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
