@@ -25,6 +25,10 @@ of earlier processes (:mod:`mitsuba_mrt.runtime.memory`) that starts empty
 every round: ``auto``, a scene's first render, chooses its plan and
 remembers it; ``auto-again``, the user's next render of the scene, takes
 it.  Every other child runs with the memory off.
+
+With ``--no-oidn`` ``auto`` renders as in a process without OIDN installed
+(:func:`mitsuba_mrt.recon.denoise.hidden`), and the alternative's ladder is
+the full render at 1-32 spp through the film's filter (``full@N``).
 """
 
 import argparse
@@ -60,7 +64,9 @@ if method == "full":
     image = mitsuba_mrt.render_reference(scene)[0]
     used, chose = "full", "full"
 elif method == "auto":
-    result = mitsuba_mrt.render(scene)
+    from mitsuba_mrt.recon.denoise import hidden
+    with hidden(sys.argv[5] == "no-oidn"):
+        result = mitsuba_mrt.render(scene)
     image, used, chose = result.image, result.mode_used, result.auto.choice.label
 elif method.startswith("plain@"):  # (the full render at fewer spp: no OIDN)
     image = mitsuba_mrt.render_reference(scene, spp=int(method.split("@")[1]))[0]
@@ -76,25 +82,30 @@ print(json.dumps({"seconds": seconds, "used": used, "chose": chose}))
 
 
 def _child(path: Path, method: str, defines: dict, folder: str,
-           memory: str = "off") -> tuple[dict, np.ndarray]:
-    """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``)."""
+           memory: str = "off", oidn: bool = True) -> tuple[dict, np.ndarray]:
+    """One render in a fresh process (``memory``: its ``MITSUBA_MRT_MEMORY``;
+    without ``oidn``, ``auto`` as without OIDN installed)."""
     image_path = os.path.join(folder, "image.npy")
     report = fresh_child(CHILD, str(path), method, json.dumps(defines), image_path,
+                         "oidn" if oidn else "no-oidn",
                          what=f"{method} render of {path.name}", memory=memory)
     return report, np.load(image_path)
 
 
-def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> list:
+def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path,
+            oidn: bool = True) -> list:
     """``bench rival``'s rows of the full render, the default ``auto`` and
-    the alternative's ladder, each render in a fresh process; the converged
-    renders kept in ``truths`` (made and kept there if missing)."""
-    from mitsuba_mrt.bench.rival import ALTERNATIVE, Row, kept_truth, noise_free_mse
+    the alternative's ladder (without ``oidn``, ``bench rival --no-oidn``'s),
+    each render in a fresh process; the converged renders kept in ``truths``
+    (made and kept there if missing)."""
+    from mitsuba_mrt.bench.rival import ALTERNATIVE, PLAIN, Row, kept_truth, noise_free_mse
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.scene import load_scene
 
     scene = load_scene(str(path), **defines)
     truth = kept_truth(scene, name, truths)
-    methods = ["full", "auto", "auto-again"] + [f"{q}@{s}" for q in ALTERNATIVE for s in LADDER]
+    qualities = ALTERNATIVE if oidn else ("plain",)
+    methods = ["full", "auto", "auto-again"] + [f"{q}@{s}" for q in qualities for s in LADDER]
     runs = {m: [] for m in methods}
     with tempfile.TemporaryDirectory() as folder:
         remembered = os.path.join(folder, "memory.json")
@@ -104,7 +115,7 @@ def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> 
             for method in methods:
                 auto = method.startswith("auto")
                 report, image = _child(path, "auto" if auto else method, defines, folder,
-                                       remembered if auto else "off")
+                                       remembered if auto else "off", oidn)
                 kind = "box" if report["used"] == "full+oidn" else "film"
                 runs[method].append((report["seconds"], paper_error(image, truth[kind]),
                                      report["chose"],
@@ -117,7 +128,7 @@ def measure(path: Path, name: str, defines: dict, rounds: int, truths: Path) -> 
         label = method
         if "@" in method:  # (bench rival's names of the alternative's rungs)
             quality, spp = method.split("@")
-            label = f"{ALTERNATIVE[quality]}{spp}"
+            label = f"{ALTERNATIVE.get(quality, PLAIN)}{spp}"
         rows.append(Row(name, label, 0, seconds, seconds / full,
                         float(np.mean([r[1] for r in rs])), float("nan"), chose,
                         mse=float(np.mean([r[3] for r in rs]))))
@@ -134,6 +145,9 @@ def main():
     parser.add_argument("--scenes", nargs="+", default=[*GALLERY_SCENES, "paper_fig1"])
     parser.add_argument("--out", help="also write NAME.csv here (--name)")
     parser.add_argument("--name", default="fresh_default")
+    parser.add_argument("--no-oidn", action="store_true",
+                        help="auto as without OIDN installed, against the full render at "
+                             "fewer spp")
     add_truths(parser)
     args = parser.parse_args()
     if args.out:  # (made now: not a lost run at the end)
@@ -148,7 +162,7 @@ def main():
         else:
             path = ROOT / "scenes_xml" / "gallery" / f"{name}.xml"
             defines = gallery_defines(name, args.res)
-        mine = measure(path, name, defines, args.rounds, Path(args.truths))
+        mine = measure(path, name, defines, args.rounds, Path(args.truths), not args.no_oidn)
         rows += mine
         full = next(r for r in mine if r.method == "full")
         for auto in (r for r in mine if r.method.startswith("auto")):
