@@ -201,7 +201,7 @@ def _recalled(memory_key: str | None) -> KeptPlan | None:
         reason = value["reason"]
     except (KeyError, TypeError):
         return None
-    if choice.kind not in ("mrt", "denoised") or not isinstance(reason, str) or (
+    if choice.kind not in ("mrt", "denoised", "full") or not isinstance(reason, str) or (
             not isinstance(choice.spp, int) or choice.spp < 1):
         return None
     return KeptPlan(choice, reason, recalled=True)

@@ -60,11 +60,22 @@ def description_key(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrato
     every process that loads the same scene with the same parameters, a key
     for what earlier processes measured (:mod:`mitsuba_mrt.runtime.memory`).
     The scene's description is taken as its sorted lines: Mitsuba loads a
-    scene's shapes in parallel, and lists them in the order they loaded."""
-    scene_lines = sorted(str(scene).splitlines())
-    text = "\n".join([mi.variant(), mi.__version__, dr.__version__, *scene_lines, str(sensor),
-                      str(integrator), str(int(pixels))])
+    scene's shapes in parallel, and lists them in the order they loaded.
+    The samplers' wavefront sizes are left out: every render sets them
+    (a process that ran ``mi.render`` describes its sensor otherwise than a
+    fresh one)."""
+    described = [_described(scene, ordered=True), _described(sensor), _described(integrator)]
+    text = "\n".join([mi.variant(), mi.__version__, dr.__version__, *described,
+                      str(int(pixels))])
     return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def _described(obj, ordered: bool = False) -> str:
+    """Mitsuba's description of ``obj`` without its samplers' wavefront sizes
+    (``wavefront_size``, ``samples_per_wavefront``), its lines sorted where
+    ``ordered``."""
+    lines = [line for line in str(obj).splitlines() if "wavefront" not in line]
+    return "\n".join(sorted(lines) if ordered else lines)
 
 
 def sampler_bakes_spp(sampler: mi.Sampler) -> bool:

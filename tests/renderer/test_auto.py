@@ -1113,8 +1113,9 @@ def test_without_oidn_the_default_is_the_checked_id_pass_where_nothing_transmits
 
 
 def test_without_oidn_glass_takes_refine_and_a_missed_check_the_full_render_for_good(
-        variant, monkeypatch):
+        variant, tmp_path, monkeypatch):
     from mitsuba_mrt.recon.denoise import hidden
+    from mitsuba_mrt.renderer.state import clear_caches
 
     glass = mi.load_string(scene_xml(384, spp=16).replace(
         '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.2, 0.2"/></bsdf>',
@@ -1125,10 +1126,13 @@ def test_without_oidn_glass_takes_refine_and_a_missed_check_the_full_render_for_
             and result.auto.reason == auto_plans.PLAIN_EDGES_REASON) or (
         result.mode_used == "full" and result.auto.reason.startswith("refine missed its check"))
     monkeypatch.setattr(auto_plans, "CHECK_SLACK", -1.0)  # no estimate is kept
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
     scene = mi.load_string(scene_xml(384, spp=16))
     with hidden():
         missed = mitsuba_mrt.render(scene)
         again = mitsuba_mrt.render(scene)
+        clear_caches()  # (the next process: the full render remembered)
+        recalled = mitsuba_mrt.render(scene)
     assert missed.mode_used == "full" and missed.auto.reason.startswith("idpass missed its check")
     assert [c.name for c in missed.auto.candidates] == ["idpass"]
     reference = mitsuba_mrt.render_reference(scene)[0]
@@ -1140,6 +1144,8 @@ def test_without_oidn_glass_takes_refine_and_a_missed_check_the_full_render_for_
     assert again.mode_used == "full" and again.auto.reason == auto.AGAIN_REASON.format(
         missed.auto.reason)
     assert again.timings.check == 0 and np.array_equal(again.image, reference)
+    assert recalled.auto.reason == auto.RECALLED_REASON.format(missed.auto.reason)
+    assert recalled.timings.check == 0 and np.array_equal(recalled.image, reference)
 
 
 def test_without_oidn_a_time_limit_takes_the_id_pass_where_it_fits(variant):

@@ -158,3 +158,21 @@ def test_a_scene_s_description_key_is_its_content_s_not_its_shapes_order(variant
     assert key(((0, 1.0), (1, 0.5))) == key(((1, 0.5), (0, 1.0)))
     assert key(((0, 1.0), (1, 0.5))) != key(((0, 1.0), (1, 0.6)))
     assert key(((0, 1.0),), 64) != key(((0, 1.0),), 65)
+
+
+def test_a_scene_s_description_key_is_the_same_after_a_full_render(variant):
+    # (mi.render sets the sampler's wavefront size, which Mitsuba's description shows: a
+    # process that rendered would not find what a fresh process remembered)
+    from helpers import ball_scene_xml
+
+    from mitsuba_mrt.renderer.api import render_reference
+    from mitsuba_mrt.renderer.scene_query import description_key
+
+    scene = mi.load_string(ball_scene_xml(32, spp=4))
+    sensor = scene.sensors()[0]
+
+    def key():
+        return description_key(scene, sensor, scene.integrator(), 32 * 32)
+    before, described = key(), str(sensor)
+    render_reference(scene)
+    assert str(sensor) != described and key() == before
