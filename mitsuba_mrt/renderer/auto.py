@@ -55,8 +55,8 @@ from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from . import kept_plans
 from .auto_limit import (TIME_MARGIN, kept_cost, measured_within, mrt_within,
-                         note_final_denoise, note_first_round, plan_memory_key, plan_within,
-                         remember_launches)
+                         note_final_denoise, note_first_round, plain_probe_due, plan_memory_key,
+                         plan_within, remember_launches)
 from .auto_plans import (HOME_MIN_SPP, PLAIN, AutoOutcome, Traced, find_surfaces, mrt_by_kind,
                          plain_plan)
 from .pilot import effective_area, run_pilot
@@ -213,7 +213,9 @@ def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
     if outcome is not None:
         return outcome, Traced()
     chosen = plain_plan(scene)
-    if chosen[0] is not PLAIN:
+    pixels = job.pattern.width * job.pattern.height
+    if chosen[0] is not PLAIN or not plain_probe_due(job.key, tracer, job.started,
+                                                     params.time_limit, pixels):
         return None, Traced()
     outcome, traced, _ = mrt_within(scene, job.pattern, tracer, params, job.started, job.notes,
                                     job.key, chosen)

@@ -150,6 +150,16 @@ RECONSTRUCTION_PER_PIXEL, RECONSTRUCTION_PER_EDGE = 0.25e-6, 0.8e-6
 #: on its shape).  Past 0.3 the error fell by at most 4 % (``idpass+oidn``
 #: on Fig. 1 at 400 px and ``checker_border`` at 256, for 1.5 times the time).
 DENSER_GRIDS = (0.2, 0.3)
+#: Without OIDN, the least a process's first undenoised ``idpass`` of a scene
+#: at 64 spp can take under a time limit: this many seconds and as many a
+#: pixel again, of which the grid's half goes with the spp
+#: (:func:`plain_probe_due`).  A fresh process's ``idpass`` at 64 spp and the
+#: grid probe before it took at least this on the gallery's scenes of
+#: :data:`~.auto_plans.PLAIN`'s kind (``two_sensors``: 0.19 s at 256 px, 0.50
+#: at 512; the others up to 0.71 and 1.84; its grid and its id pass about
+#: half each; 2 cores): under it the probe, the first trace of the scene and
+#: a fifth to four fifths of such a limit, only delays the passes after it.
+PLAIN_FLOOR = (0.085, 1.6e-6)
 #: The reason of :data:`HOME` taken under a time limit (``{}``: its kind's).
 WITHIN_REASON = "{}; within the time limit"
 
@@ -396,6 +406,24 @@ def measured_within(key: tuple, started: float, limit: float, notes: list,
     plan = Plan(choice, MEASURED_REASON.format(reason, choice.spp, choice.seconds),
                 time_limit=limit, notes=notes, pilot_s=time.perf_counter() - started)
     return AutoOutcome(plan, kept_key=kept_key)
+
+
+def plain_probe_due(key: tuple, tracer, started: float, limit: float, pixels: int) -> bool:
+    """Without OIDN, under a time limit started at ``started``: whether
+    :func:`mrt_within` may trace its grid probe of ``key``'s scene (of
+    ``pixels`` pixels, at ``tracer``'s spp) for :data:`~.auto_plans.PLAIN`.
+    Not where this process has not launched the scene's passes, no probe of
+    it is known (this process's or an earlier one's, :func:`_recalled_probe`)
+    and the time left is under :data:`PLAIN_FLOOR`: there the plan, its
+    first traces recorded, cannot end in time, and the passes go at once."""
+    fixed, per_pixel = PLAIN_FLOOR
+    floor = fixed + per_pixel * pixels * (1.0 + min(tracer.spp, 64) / 64) / 2
+    if started + limit - time.perf_counter() >= floor:
+        return True
+    launches = _launch_costs.get(key)
+    if launches is not None and launches.launched_here:
+        return True
+    return key in _probe_execute or _recalled_probe(key, tracer) is not None
 
 
 def mrt_within(scene, pattern: SamplePattern, tracer, params: MRTParams, started: float,

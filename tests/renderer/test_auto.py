@@ -1161,6 +1161,27 @@ def test_without_oidn_a_time_limit_takes_the_id_pass_where_it_fits(variant):
     assert short.mode_used == "passes" and short.timings.denoise == 0
 
 
+def test_without_oidn_a_first_render_under_the_plain_floor_traces_no_probe(variant,
+                                                                             monkeypatch):
+    from mitsuba_mrt.recon.denoise import hidden
+
+    probes = []
+    real = auto_limit._grid_probe
+    monkeypatch.setattr(auto_limit, "_grid_probe",
+                        lambda *args: probes.append(1) or real(*args))
+    monkeypatch.setattr(auto_limit, "PLAIN_FLOOR", (100.0, 0.0))  # (any limit is under it)
+    scene = mi.load_string(scene_xml(96, spp=16))
+    with hidden():
+        first = mitsuba_mrt.render(scene, time_limit=5.0)
+        assert first.mode_used == "passes" and probes == []  # the passes at once
+        # the passes launched in this process: the next render may ask the probe
+        mitsuba_mrt.render(scene, time_limit=5.0)
+        assert probes == [1]
+        monkeypatch.setattr(auto_limit, "PLAIN_FLOOR", (0.0, 0.0))  # (above it: probed)
+        mitsuba_mrt.render(mi.load_string(scene_xml(96, spp=16)), time_limit=5.0)
+    assert probes == [1, 1]
+
+
 def test_undenoised_passes_are_developed_through_the_film_s_filter(variant, monkeypatch):
     from mitsuba_mrt.recon.denoise import hidden
     from mitsuba_mrt.renderer import progressive
