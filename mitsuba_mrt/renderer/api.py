@@ -35,7 +35,7 @@ from .pilot import effective_area
 from .pipeline import mrt_image
 from .replay import Recorded, recorded_so_far, recording_seconds, recordings
 from .scene import resolve_sensor, unwrap
-from .trace import pass_recorded, trace_pixels
+from .trace import pass_recorded, scene_warm, trace_pixels
 
 # Intel Open Image Denoise's module, where installed, loads with the renderer:
 # its import (tens of milliseconds, mostly reading package metadata) is then
@@ -134,6 +134,11 @@ class GridTracer:
         it (with the ``guides``, the odd samples apart where ``halves``),
         would replay a recording: :func:`~.trace.pass_recorded`."""
         return pass_recorded(self.scene, self.sensor, self.integrator, spp, guides, halves)
+
+    def warm(self) -> bool:
+        """Whether a trace finds the scene's first uses in this process paid:
+        :func:`~.trace.scene_warm`."""
+        return scene_warm(self.scene, self.sensor, self.integrator)
 
 
 def _spp_of(spp: int | None, sensor) -> int:

@@ -412,16 +412,14 @@ def plain_probe_due(key: tuple, tracer, started: float, limit: float, pixels: in
     """Without OIDN, under a time limit started at ``started``: whether
     :func:`mrt_within` may trace its grid probe of ``key``'s scene (of
     ``pixels`` pixels, at ``tracer``'s spp) for :data:`~.auto_plans.PLAIN`.
-    Not where this process has not launched the scene's passes, no probe of
-    it is known (this process's or an earlier one's, :func:`_recalled_probe`)
-    and the time left is under :data:`PLAIN_FLOOR`: there the plan, its
-    first traces recorded, cannot end in time, and the passes go at once."""
+    Not where this process has traced nothing of the scene (the tracer is not
+    :meth:`~.api.GridTracer.warm`), no probe of it is known (an earlier
+    process's, :func:`_recalled_probe`) and the time left is under
+    :data:`PLAIN_FLOOR`: there the plan, its first traces paying the
+    scene's first uses, cannot end in time, and the passes go at once."""
     fixed, per_pixel = PLAIN_FLOOR
     floor = fixed + per_pixel * pixels * (1.0 + min(tracer.spp, 64) / 64) / 2
-    if started + limit - time.perf_counter() >= floor:
-        return True
-    launches = _launch_costs.get(key)
-    if launches is not None and launches.launched_here:
+    if started + limit - time.perf_counter() >= floor or tracer.warm():
         return True
     return key in _probe_execute or _recalled_probe(key, tracer) is not None
 

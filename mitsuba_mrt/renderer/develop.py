@@ -342,6 +342,13 @@ def every_pixel_recorded(scene, sensor, integrator, spp: int, albedo: bool,
     return _DEVELOP.recorded(objects, layout)
 
 
+def any_recorded(scene, sensor, integrator) -> bool:
+    """Whether :func:`_develop_jit` recorded a trace of these objects in this
+    process (of any layout): their first uses are paid, and a recording of
+    another layout costs its tracing alone."""
+    return bool(_DEVELOP.layouts((scene, sensor, integrator)))
+
+
 def filter_cell(u, cdf, first, steps: int, cells: int):
     """The cell of the tabulated filter distribution that uniform numbers ``u``
     (a Dr.Jit ``Float`` in [0, 1)) fall in: the first ``k`` with

@@ -19,7 +19,7 @@ from ..errors import MRTError
 from ..types import SparseTrace
 from .albedo_pass import albedo_pass
 from .develop import (ALBEDO_FIRST_SAMPLES, _develop_jit, _develop_scalar, _Developed,
-                      every_pixel_recorded)
+                      any_recorded, every_pixel_recorded)
 from .ids import _ids_jit, _ids_scalar, shape_indices
 from .lanes import is_jit
 from .replay import active as replay_active
@@ -172,6 +172,15 @@ def pass_recorded(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         return False
     taken = set_sample_count(sensor.sampler().clone(), spp)
     return every_pixel_recorded(scene, sensor, integrator, taken, albedo, halves)
+
+
+def scene_warm(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator) -> bool:
+    """Whether a trace of ``scene`` through ``sensor`` with ``integrator``
+    finds its first uses paid: in a JIT variant, where this process recorded
+    one (:func:`trace_pixels` with ``replay``; a fresh process's first trace
+    of the scene records its kernels and pays its first uses); always in a
+    scalar variant, which records nothing."""
+    return not is_jit() or any_recorded(scene, sensor, integrator)
 
 
 def trace_shapes(scene: mi.Scene, sensor: mi.Sensor, pixel_xy: np.ndarray,

@@ -1174,7 +1174,7 @@ def test_without_oidn_a_first_render_under_the_plain_floor_traces_no_probe(varia
     with hidden():
         first = mitsuba_mrt.render(scene, time_limit=5.0)
         assert first.mode_used == "passes" and probes == []  # the passes at once
-        # the passes launched in this process: the next render may ask the probe
+        # the scene traced in this process, its first uses paid: the next render may probe
         mitsuba_mrt.render(scene, time_limit=5.0)
         assert probes == [1]
         monkeypatch.setattr(auto_limit, "PLAIN_FLOOR", (0.0, 0.0))  # (above it: probed)
