@@ -602,8 +602,10 @@ def test_a_time_limit_below_one_pass_and_oidn_gives_a_preview(scene, monkeypatch
     assert plan.time_limit == 1e-6 and plan.passes == []
     assert np.isfinite(result.image).all() and result.traced.grid > 0
     assert plan.notes[0] == auto_limit.UNDENOISED_NOTE
-    assert plan.notes[-1].endswith("the time limit of 1e-06 s: the preview is the least "
-                                   "this image costs here")
+    # (the overrun's reason: a kernel compiled where Dr.Jit's disk cache lacked it)
+    why = ("which Dr.Jit keeps on disk for later renders" if result.timings.compile.compiled
+           else "the time limit of 1e-06 s: the preview is the least this image costs here")
+    assert plan.notes[-1].endswith(why)
     # the grid that told the plan is the preview's own: the image is the mode's
     direct = mitsuba_mrt.render(scene, mode="fast", spp=1, denoise="none")
     assert np.array_equal(result.image, direct.image)
