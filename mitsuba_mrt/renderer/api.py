@@ -268,10 +268,14 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     if outcome.preview_key is not None:  # (at the preset its time was planned at)
         run = auto_limit.preview_params(run)
     begin = time.perf_counter()
-    result = _mrt(pattern, planned, run, choice.mode, plan, start, progress or _quiet,
-                  outcome.grid)
+    grid, grid_recording_s = outcome.grid, recording_seconds()
+    if grid is None:  # (what recording its kernels took: the kept plan's grid's share)
+        grid = planned(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
+    grid_recording_s = recording_seconds() - grid_recording_s
+    result = _mrt(pattern, planned, run, choice.mode, plan, start, progress or _quiet, grid)
     if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
-        return _checked(result, scene, pattern, tracer, params, start, recorded, progress)
+        return _checked(result, scene, pattern, tracer, params, start, recorded, progress,
+                        grid_recording_s)
     if outcome.preview_key is not None and choice.mode == "fast":
         # (its grid was traced: the rest of a preview, for the next one)
         auto_limit.note_preview_after(outcome.preview_key, time.perf_counter() - begin,
@@ -284,10 +288,12 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
 
 
 def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer: GridTracer,
-             params: MRTParams, start: float, recorded: Recorded, progress) -> MRTResult:
+             params: MRTParams, start: float, recorded: Recorded, progress,
+             grid_recording_s: float = 0.0) -> MRTResult:
     """``result``, an MRT image ``auto`` chose without a pilot, if its held-out
     check keeps it (:func:`.auto_plans.keeps`; then :mod:`.kept_plans` keeps what
-    it took, less what recording its traces took since ``recorded``); else
+    it took, less what recording its traces took since ``recorded``, of which
+    ``grid_recording_s`` its grid's trace); else
     ``auto``'s denoised passes (without OIDN, the full render, kept for the
     scene's next renders), the MRT's seconds and the check's counted as
     ``check``."""
@@ -305,7 +311,8 @@ def _checked(result: MRTResult, scene: mi.Scene, pattern: SamplePattern, tracer:
         result.timings.close(time.perf_counter() - start)
         kept_plans.note_checked(key, plan.choice, plan.reason,
                                 result.timings.total - held.seconds, result.timings,
-                                recording_s, auto_limit.plan_memory_key(key, tracer))
+                                recording_s, auto_limit.plan_memory_key(key, tracer),
+                                grid_recording_s)
         return result
     outcome = auto.run_auto(scene, pattern, tracer, params, start, escape=False,
                             on_round=progress)

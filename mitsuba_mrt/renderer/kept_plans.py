@@ -146,12 +146,15 @@ def spp_ladder(least: int, most: int) -> list[int]:
 
 
 def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
-                 timings, recording_s: float = 0.0, memory_key: str | None = None) -> None:
+                 timings, recording_s: float = 0.0, memory_key: str | None = None,
+                 grid_recording_s: float | None = None) -> None:
     """Keep what a render of ``choice`` (a plan its check kept, at its spp)
     took for ``key``: ``seconds`` (its check left out) and the share of
     them the growing traces of ``timings`` (:class:`~mitsuba_mrt.types.Timings`)
-    took, both less ``recording_s``, what recording its traces' replays
-    took (:func:`~.replay.recording_seconds`; a replay takes none of it).
+    took, each less what recording its traces' replays took
+    (:func:`~.replay.recording_seconds`; a replay takes none of it): all
+    traces' ``recording_s``, and the growing traces' own, where they are the
+    grid's alone (:data:`GROWING`), ``grid_recording_s`` (None: all of it).
     Another plan for ``key`` starts anew; the plan is remembered under
     ``memory_key`` (:func:`_remember`)."""
     kept = _plans.get(key)
@@ -161,7 +164,10 @@ def note_checked(key: tuple, choice: Candidate, reason: str, seconds: float,
     recording_s = min(max(recording_s, 0.0), seconds)
     replayed = seconds - recording_s
     note(kept.seconds.setdefault(choice.spp, []), replayed, PLAN_CALLS)
-    growing = sum(getattr(timings, part) for part in GROWING[choice.mode]) - recording_s
+    parts = GROWING[choice.mode]
+    grid_alone = parts == ("trace",) and grid_recording_s is not None
+    own_recording = min(max(grid_recording_s, 0.0), recording_s) if grid_alone else recording_s
+    growing = sum(getattr(timings, part) for part in parts) - own_recording
     note(kept.growing, min(max(growing, 0.0) / replayed, 1.0) if replayed > 0 else 0.0,
          PLAN_CALLS)
     keep(_plans, key, kept, KEPT_PLANS)

@@ -374,6 +374,38 @@ def test_a_checked_render_s_recordings_are_left_out_of_its_kept_time():
         kept_plans.clear()
 
 
+def test_an_idpass_plan_s_grid_share_leaves_out_only_its_grid_s_recording():
+    # the checked render (0.6 s, its grid 0.3 s and its id pass 0.2 s) spent 0.3 s
+    # recording, 0.1 s of it in its grid's trace: a replay takes 0.3 s, its grid
+    # 0.2 s of it (the id pass's recording is none of the grid's)
+    choice = Candidate("idpass+oidn", "mrt", 32, mode="idpass", denoise=True)
+    key = ("scene",)
+    try:
+        kept_plans.note_checked(key, choice, "", 0.6, Timings(trace=0.3, trace_more=0.2),
+                                recording_s=0.3, grid_recording_s=0.1)
+        kept = kept_plans._plans[key]
+        assert kept.seconds[32] == [pytest.approx(0.3)]
+        assert kept.growing == [pytest.approx(0.2 / 0.3)]
+        assert kept_plans.growing_seconds(key, 32) == pytest.approx(0.2)
+    finally:
+        kept_plans.clear()
+
+
+def test_a_checked_render_gives_its_grid_s_own_recording_to_the_kept_plan(variant,
+                                                                          monkeypatch):
+    from mitsuba_mrt.recon.denoise import hidden
+
+    seen = []
+    real = kept_plans.note_checked
+    monkeypatch.setattr(kept_plans, "note_checked", lambda *args: seen.append(args) or real(*args))
+    scene = mi.load_string(scene_xml(384, spp=16))  # (its first traces: each records)
+    with hidden():
+        mitsuba_mrt.render(scene)
+    (args,) = seen
+    recording_s, grid_recording_s = args[5], args[7]
+    assert 0.0 < grid_recording_s < recording_s  # the grid's, of the grid's and the id pass's
+
+
 def test_a_sampler_that_bakes_its_spp_keeps_the_checked_plan_s_spp_under_a_time_limit(
         variant, monkeypatch):
     scene = mi.load_string(scene_xml(384, spp=16, sampler="stratified").replace(AREA_LIGHT,
