@@ -268,10 +268,9 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     if outcome.preview_key is not None:  # (at the preset its time was planned at)
         run = auto_limit.preview_params(run)
     begin = time.perf_counter()
-    grid, grid_recording_s = outcome.grid, recording_seconds()
-    if grid is None:  # (what recording its kernels took: the kept plan's grid's share)
-        grid = planned(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
-    grid_recording_s = recording_seconds() - grid_recording_s
+    before = recording_seconds()  # (what its grid's recording takes: its kept share's)
+    grid = outcome.grid if outcome.grid is not None else _grid_trace(planned, pattern)
+    grid_recording_s = recording_seconds() - before
     result = _mrt(pattern, planned, run, choice.mode, plan, start, progress or _quiet, grid)
     if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
         return _checked(result, scene, pattern, tracer, params, start, recorded, progress,
@@ -349,8 +348,7 @@ def _mrt(pattern: SamplePattern, tracer: GridTracer, params: MRTParams, mode: st
          ) -> MRTResult:
     """The MRT's pipeline: trace the grid (unless ``grid`` is its trace
     already), denoise, reconstruct, finish."""
-    trace = grid if grid is not None else tracer(pattern.pixel_xy, stream=SeedStream.GRID,
-                                                 replay=True)
+    trace = grid if grid is not None else _grid_trace(tracer, pattern)
     progress("trace", 0.5)
     made = mrt_image(tracer.scene, pattern, trace, params, mode, tracer)
     progress("reconstruct", 1.0)
@@ -369,6 +367,11 @@ def _mrt(pattern: SamplePattern, tracer: GridTracer, params: MRTParams, mode: st
                      trace.spp, "auto" if plan else mode, mode,
                      timings.close(time.perf_counter() - start), skips, dict(recon.stats),
                      plan, traced, alpha)
+
+
+def _grid_trace(tracer: GridTracer, pattern: SamplePattern) -> SparseTrace:
+    """The grid's trace: ``pattern``'s pixels, replayed on the image's next renders."""
+    return tracer(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
 
 
 def render_denoised(scene: mi.Scene, integrator: mi.Integrator | None = None, *,

@@ -207,13 +207,12 @@ def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
     scene, tracer, params = job.scene, job.tracer, job.params
     if params.noise_threshold is not None or tracer.spp < HOME_MIN_SPP:
         return None, Traced()
+    pixels = job.pattern.width * job.pattern.height
     outcome = measured_within(job.kept_key, job.started, params.time_limit, job.notes,
-                              sampler_bakes_spp(tracer.sensor.sampler()),
-                              job.pattern.width * job.pattern.height, params)
+                              sampler_bakes_spp(tracer.sensor.sampler()), pixels, params)
     if outcome is not None:
         return outcome, Traced()
     chosen = plain_plan(scene)
-    pixels = job.pattern.width * job.pattern.height
     if chosen[0] is not PLAIN or not plain_probe_due(job.key, tracer, job.started,
                                                      params.time_limit, pixels):
         return None, Traced()

@@ -6,7 +6,8 @@ the scene's kind (its lights, surfaces and the image's size) and points to
 ``refine``, its grid denoised), or to neither (the passes);
 :func:`mrt_by_kind` makes that plan, its image to be checked
 (:func:`keeps`).  Without OIDN the plan is :data:`PLAIN` (mode ``idpass``,
-undenoised) or :data:`PLAIN_EDGES` (``refine``), checked too (:func:`plain_plan`).  :class:`AutoOutcome` is what every path of
+undenoised) or :data:`PLAIN_EDGES` (``refine``), checked too
+(:func:`plain_plan`).  :class:`AutoOutcome` is what every path of
 :func:`~.auto.run_auto` returns.
 """
 
