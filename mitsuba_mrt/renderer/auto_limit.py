@@ -280,9 +280,10 @@ def launch_ladder(sampler) -> frozenset:
 
 def remember_launches(key: tuple, tracer) -> None:
     """Keep the launches of ``key`` (:data:`_launch_costs`) for later
-    processes that render the same scene (:mod:`mitsuba_mrt.runtime.memory`)."""
+    processes that render the same scene (:mod:`mitsuba_mrt.runtime.memory`),
+    where they have something new (:meth:`~.launch_cost.LaunchCost.memory_due`)."""
     cost = _launch_costs.get(key)
-    if cost is not None and cost.launched_here and memory.enabled():
+    if cost is not None and cost.memory_due() and memory.enabled():
         memory.remember(_memory_key(key, tracer), cost.memory())
 
 

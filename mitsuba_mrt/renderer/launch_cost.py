@@ -168,15 +168,45 @@ class LaunchCost:
     #: Dr.Jit's disk cache holds their kernels once a scene's earlier
     #: time-limited renders have launched them (a first launch compiles them).
     ladder: frozenset = frozenset()
+    #: The (spp, recorded) of this process's launches that :meth:`memory`
+    #: gave, and how many launches were added since (:meth:`memory_due`).
+    remembered: frozenset = frozenset()
+    since_remembered: int = 0
 
     def __post_init__(self):
         self.launches = [Launch(*launch) for launch in self.launches]
 
     def memory(self) -> dict:
         """The launches, as :mod:`mitsuba_mrt.runtime.memory` keeps them for
-        later processes (:meth:`from_memory`)."""
+        later processes (:meth:`from_memory`); :meth:`memory_due` is False
+        until another launch is due to be kept."""
+        self.remembered = self._kinds_here()
+        self.since_remembered = 0
         return {"spp_compiles": self.spp_compiles,
                 "launches": [list(launch[:6]) for launch in self.launches]}
+
+    def memory_due(self) -> bool:
+        """Whether later processes lack what this one learnt: a launch of a
+        kind (spp, recorded) since :meth:`memory` last gave the launches, or
+        as many launches as it keeps (their window moved on).  A scene
+        rendered again and again writes its memory once in so many renders.
+
+        Examples
+        --------
+        >>> cost = LaunchCost(); cost.add(8, 0.2, recorded=True); cost.memory_due()
+        True
+        >>> _ = cost.memory(); cost.add(8, 0.1); cost.memory_due()
+        True
+        >>> _ = cost.memory(); cost.add(8, 0.1); cost.memory_due()
+        False
+        """
+        return self.launched_here and (not self._kinds_here() <= self.remembered
+                                       or self.since_remembered >= KEPT_LAUNCHES)
+
+    def _kinds_here(self) -> frozenset:
+        """The (spp, recorded) of this process's launches kept."""
+        return frozenset((launch.spp, launch.recorded) for launch in self.launches
+                         if not launch.elsewhere)
 
     @classmethod
     def from_memory(cls, value: dict | None, spp_compiles: bool) -> "LaunchCost | None":
@@ -218,6 +248,7 @@ class LaunchCost:
             bool(first), None if not recorded or recording_s is None
             else float(np.clip(recording_s, 0.0, seconds))))
         del self.launches[:-KEPT_LAUNCHES]
+        self.since_remembered += 1
 
     def _line(self) -> tuple[float, float]:
         """(fixed, per_spp) of a replayed launch: through the replayed

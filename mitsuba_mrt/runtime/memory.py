@@ -89,8 +89,9 @@ def remember(key: str, value: dict) -> None:
         file.parent.mkdir(parents=True, exist_ok=True)
         handle, temporary = tempfile.mkstemp(dir=file.parent, prefix=".mitsuba-mrt-")
         try:
+            text = json.dumps({"version": VERSION, "scenes": scenes})  # (C encoder; not dump)
             with os.fdopen(handle, "w", encoding="utf-8") as f:
-                json.dump({"version": VERSION, "scenes": scenes}, f)
+                f.write(text)
             os.replace(temporary, file)
         except BaseException:
             os.unlink(temporary)

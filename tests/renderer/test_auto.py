@@ -765,6 +765,29 @@ def test_a_new_process_plans_a_time_limit_from_what_an_earlier_one_remembered(
         mitsuba_mrt.render(scene, time_limit=10.0)
 
 
+def test_a_scene_s_launches_are_written_again_only_where_later_processes_lack_something(
+        tmp_path, monkeypatch):
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
+    monkeypatch.setattr(auto_limit, "_memory_key", lambda key, tracer: "scene")
+    written = []
+    monkeypatch.setattr(auto_limit.memory, "remember", lambda key, value: written.append(value))
+    cost = launch_cost.LaunchCost()
+    monkeypatch.setattr(auto_limit, "_launch_costs", {"key": cost})
+
+    def launch(spp, recorded=False):
+        cost.add(spp, 0.01 * spp, recorded=recorded)
+        auto_limit.remember_launches("key", None)
+    launch(8, recorded=True)
+    launch(8)  # (its first replay: a kind the memory lacks)
+    assert len(written) == 2
+    for _ in range(launch_cost.KEPT_LAUNCHES - 1):  # the same again: nothing new
+        launch(8)
+    assert len(written) == 2
+    launch(8)  # (as many launches as are kept since: their window moved on)
+    launch(4)  # (a new spp)
+    assert len(written) == 4 and written[-1]["launches"][-1][0] == 4
+
+
 def test_a_grid_probe_is_remembered_where_it_compiled_nothing(tmp_path, monkeypatch):
     monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(tmp_path / "memory.json"))
     monkeypatch.setattr(auto_limit, "_memory_key", lambda key, tracer: "scene")
