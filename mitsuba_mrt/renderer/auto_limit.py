@@ -41,7 +41,7 @@ from .auto_plans import (EDGE_TESTED, HOME, HOME_MIN_SPP, AutoOutcome, Traced, e
                          find_surfaces, trace_id_pass, unmeasured_plan)
 from .preview import preview_grid
 from .launch_cost import LaunchCost
-from .replay import recordings
+from .replay import recording_seconds, recordings
 from .scene_query import (description_key, sample_count_at_most, sampler_bakes_spp,
                           textured_diffuse_shapes)
 
@@ -608,7 +608,7 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
         return _preview_due(end, time.perf_counter() + pass_s, width * height,
                             params.denoise_quality, shading, key)
     if due(False):
-        return AutoOutcome(preview, grid=grid), None, False
+        return AutoOutcome(preview, grid=grid, grid_recording_s=probed.recording), None, False
     if textured and not due(True):
         # the passes' textured pixels, then the same question with their time spent
         surfaces = find_surfaces(scene, tracer, width, height,
@@ -616,7 +616,8 @@ def preview_first(scene, pattern: SamplePattern, tracer, params: MRTParams, star
         if not due(surfaces is not None):
             return None, surfaces, True
     # the passes, denoised plainly: the shading's extra time would end past the limit
-    return (AutoOutcome(preview, grid=grid) if due(False) else None), None, True
+    return (AutoOutcome(preview, grid=grid, grid_recording_s=probed.recording)
+            if due(False) else None), None, True
 
 
 def note_baked(key: tuple, notes: list) -> None:
@@ -643,7 +644,8 @@ def filled_preview(outcome: AutoOutcome, pattern: SamplePattern, tracer, params:
     upsampled (:data:`UPSAMPLED_NOTE`)."""
     after = _preview_after(key, pattern, params.denoise_quality, tracer)
     grid = preview_grid(outcome.grid, pattern, tracer,
-                        started + TIME_MARGIN * params.time_limit - after)
+                        started + TIME_MARGIN * params.time_limit - after,
+                        outcome.grid_recording_s)
     plan = outcome.plan
     plan.choice = replace(plan.choice, spp=grid.spp)
     outcome = replace(outcome, grid=grid, preview_key=key)
@@ -790,7 +792,8 @@ class _Probe(NamedTuple):
     process's first trace of the scene), what compiling those not in
     Dr.Jit's caches took of ``host`` (once per machine, not per process) and
     whether it was the process's first recording of all (its ``host`` holds
-    the first uses a fresh process pays).
+    the first uses a fresh process pays); what of it recorded the kernels
+    (``recording``: a replay of the grid saves it).
     ``grid`` is None for a probe an earlier process made (:func:`_recalled_line`)."""
 
     grid: SparseTrace | None
@@ -800,6 +803,7 @@ class _Probe(NamedTuple):
     recorded: bool
     compile: float = 0.0
     first: bool = False
+    recording: float = 0.0
 
 
 def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
@@ -808,14 +812,15 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
     time scaled to every pixel, times :data:`PASS_OVER_GRID`, plus what the
     trace took beyond its kernels (launching them, reading them back, and
     in a fresh process the first use of the scene and the kernels)."""
-    begin, recorded = time.perf_counter(), recordings()
+    begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
     with kernel_seconds() as spent:
         grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
                                                 replay=True)
     host = max(time.perf_counter() - begin - spent.execute, 0.0)
     pass_s = _pass_seconds(host, spent.execute, pattern.width * pattern.height, pattern.count)
     return _Probe(grid, pass_s, spent.execute, host, recordings() > recorded,
-                  min(spent.compile, host), recorded == 0 < recordings())
+                  min(spent.compile, host), recorded == 0 < recordings(),
+                  recording_seconds() - recording)
 
 
 def _pass_seconds(host: float, execute: float, pixels: int, count: int) -> float:

@@ -127,7 +127,8 @@ SMALL_IMAGE_SPREAD = 2
 @dataclass
 class AutoOutcome:
     """``auto``'s plan, and the image when the passes made it (``grid``: the
-    preview's grid, where tracing it told the plan; ``check``: the plan's
+    preview's grid, where tracing it told the plan, and what its launch spent
+    recording its kernels, ``grid_recording_s``; ``check``: the plan's
     MRT image is to be checked, :func:`keeps`; ``id_pass``: the image's id
     pass, where the plan traced it; ``preview_key``: a preview's key, under
     which :func:`~.auto_limit.note_preview_after` keeps what its later stages take;
@@ -143,6 +144,7 @@ class AutoOutcome:
     id_pass: SparseTrace | None = None
     preview_key: tuple | None = None
     kept_key: tuple | None = None
+    grid_recording_s: float = 0.0
 
 
 def keeps(held: HeldOut) -> bool:

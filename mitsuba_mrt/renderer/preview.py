@@ -20,6 +20,7 @@ import numpy as np
 from ..recon.sampling import SamplePattern
 from ..types import SeedStream, SparseTrace
 from .develop import sample_variance
+from .replay import recording_seconds
 
 #: The most 1-spp launches a preview's grid pools: a bound the time rarely
 #: leaves room for (a preview is taken where one pass of every pixel does not
@@ -65,17 +66,21 @@ def pooled(traces: list[SparseTrace]) -> SparseTrace:
 
 
 def preview_grid(grid: SparseTrace | None, pattern: SamplePattern, tracer,
-                 until: float) -> SparseTrace:
-    """The preview's grid: ``grid`` (its first 1-spp launch; traced here
-    where None), pooled with more 1-spp launches while the next is expected
-    to end by ``until`` (a ``time.perf_counter()`` value), at most
-    :data:`PREVIEW_MAX_SPP` in all.  A launch is expected to take what the
-    last one took: after one that recorded its kernels, what recording took
-    (the next replays them, or records again without loading them)."""
+                 until: float, recording_s: float = 0.0) -> SparseTrace:
+    """The preview's grid: ``grid`` (its first 1-spp launch, of which
+    ``recording_s`` recorded its kernels; traced here where None), pooled
+    with more 1-spp launches while the next is expected to end by ``until``
+    (a ``time.perf_counter()`` value), at most :data:`PREVIEW_MAX_SPP` in
+    all.  A launch is expected to take what the last one took, less what
+    recording took in it: the next replays what it recorded (its first uses
+    of the scene, in a fresh process, still counted: a bound above a
+    replay's time)."""
     one = replace(tracer, spp=1)
     if grid is None:
+        before = recording_seconds()
         grid = one(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
-    traces, step = [grid], grid.seconds
+        recording_s = recording_seconds() - before
+    traces, step = [grid], max(grid.seconds - recording_s, 0.0)
     while len(traces) < PREVIEW_MAX_SPP and time.perf_counter() + step <= until:
         begin = time.perf_counter()
         traces.append(one(pattern.pixel_xy, stream=SeedStream.PREVIEW + len(traces),

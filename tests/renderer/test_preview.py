@@ -50,6 +50,10 @@ def test_a_preview_pools_1_spp_launches_of_seeds_of_its_own_while_the_limit_allo
     slow = replace(first, seconds=120.0)
     assert preview_grid(slow, pattern, tracer, until=time.perf_counter() + 60.0) is slow
     assert tracer.calls == []
+    # ... unless recording its kernels took that time: the next launches replay them
+    grid = preview_grid(slow, pattern, tracer, until=time.perf_counter() + 60.0,
+                        recording_s=119.99)
+    assert grid.spp == PREVIEW_MAX_SPP
     # no time left: the first launch alone, traced here where not given
     tracer = _Tracer(spp=64)
     alone = preview_grid(None, pattern, tracer, until=time.perf_counter() - 1.0)
@@ -83,3 +87,15 @@ def test_a_sampler_that_bakes_its_spp_is_judged_by_the_spp_it_has_launched(varia
                                                  time.perf_counter(), key, [])
         # without baking, a pass is the probe's one sample: it fits
         assert (outcome is not None and outcome.plan.choice.mode == "fast") == bakes
+
+
+def test_the_probe_tells_what_of_it_recorded_its_kernels_which_its_replay_does_not(variant):
+    scene = mi.load_string(ball_scene_xml(64))  # (new objects: their first trace records)
+    tracer = GridTracer(scene, scene.sensors()[0], scene.integrator(), 16, 0)
+    pattern = grid_pattern(64, 64, 0.1)
+    first, again = (auto_limit._grid_probe(pattern, tracer) for _ in range(2))
+    if first.recorded:  # (a JIT variant: the first probe recorded, the second replays)
+        assert 0.0 < first.recording <= first.grid.seconds
+        assert not again.recorded and again.recording == 0.0
+    else:
+        assert first.recording == again.recording == 0.0
