@@ -2,6 +2,7 @@
 
     python examples/first_calls.py [--sizes 64 128 256 400 512] [--rounds 2]
     python examples/first_calls.py --passes 256 512
+    python examples/first_calls.py --previews 256 384 512 768
 
 A time-limited render in a fresh process plans its first OIDN call from a
 prior (:func:`mitsuba_mrt.recon.denoise.prior_seconds`), which is meant to
@@ -16,8 +17,14 @@ With ``--passes RES ...``: per gallery scene at each size, a fresh
 process's first pass over every pixel (1 spp, box filter, guides; kernels
 from Dr.Jit's disk cache: run it twice after a change) over the ``fast``
 prior, which ``auto --time-limit`` compares the time left with before it
-asks the grid probe (``UNPROBED_OVER_OIDN``).  The memory of earlier
-processes is off in every child.
+asks the grid probe (``UNPROBED_OVER_OIDN``).
+
+With ``--previews RES ...``: per gallery scene at each size, a fresh
+process's first preview (mode ``fast`` at 1 spp, its grid through OIDN at
+the preview's preset): the seconds of its stages after the grid other than
+OIDN, and its OIDN call over that call's expected time, which a fresh
+process's first preview plans from (``auto_limit.PREVIEW_FIRST_REST``,
+``PREVIEW_FIRST_OIDN``).  The memory of earlier processes is off in every child.
 """
 
 import argparse
@@ -77,6 +84,42 @@ print(json.dumps({"first": time.perf_counter() - start,
                   "prior": denoise.prior_seconds(width * height, "fast")}))
 """
 
+#: One process's first preview of a gallery scene: its stages after the grid, as one JSON line.
+PREVIEW_CHILD = """
+import json, sys
+import mitsuba_mrt
+from mitsuba_mrt import runtime
+runtime.configure()
+mitsuba_mrt.activate("auto")
+from mitsuba_mrt.bench.experiments import gallery_defines
+from mitsuba_mrt.recon.denoise import expected_seconds
+from mitsuba_mrt.recon.sampling import grid_pattern
+from mitsuba_mrt.renderer.auto_limit import PREVIEW_QUALITY
+name, res = sys.argv[1], int(sys.argv[2])
+scene = mitsuba_mrt.load_scene(f"scenes_xml/gallery/{name}.xml", **gallery_defines(name, res))
+width, height = (int(v) for v in scene.sensors()[0].film().crop_size())
+expected = expected_seconds(grid_pattern(width, height, 0.1).count, PREVIEW_QUALITY)
+t = mitsuba_mrt.render(scene, mode="fast", denoise="oidn", denoise_quality=PREVIEW_QUALITY,
+                       spp=1).timings
+print(json.dumps({"rest": t.total - t.trace - t.trace_more - t.denoise, "oidn": t.denoise,
+                  "expected": expected, "pixels": width * height}))
+"""
+
+
+def first_previews(sizes: list) -> None:
+    from mitsuba_mrt.bench.experiments import GALLERY_SCENES
+
+    for res in sizes:
+        runs = [fresh_child(PREVIEW_CHILD, name, str(res), what=f"{name}'s first preview",
+                            cwd=ROOT) for name in GALLERY_SCENES]
+        for name, run in zip(GALLERY_SCENES, runs):
+            print(f"{name:16s} {res:4d} px: after the grid {run['rest']:.4f} s and OIDN "
+                  f"{run['oidn']:.4f} s, {run['oidn'] / run['expected']:.2f} x expected")
+        print(f"{res} px: the rest {min(r['rest'] for r in runs):.4f}-"
+              f"{max(r['rest'] for r in runs):.4f} s, OIDN "
+              f"{min(r['oidn'] / r['expected'] for r in runs):.2f}-"
+              f"{max(r['oidn'] / r['expected'] for r in runs):.2f} x expected")
+
 
 def oidn_calls(sizes: list, rounds: int) -> None:
     print(f"{'px':>4s} {'preset':9s} {'prior s':>8s} {'first s':>8s} {'longest':>8s} "
@@ -113,8 +156,12 @@ def main():
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--passes", type=int, nargs="+", metavar="RES",
                         help="first passes of the gallery at these sizes instead")
+    parser.add_argument("--previews", type=int, nargs="+", metavar="RES",
+                        help="first previews of the gallery at these sizes instead")
     args = parser.parse_args()
-    if args.passes:
+    if args.previews:
+        first_previews(args.previews)
+    elif args.passes:
         first_passes(args.passes)
     else:
         oidn_calls(args.sizes, args.rounds)

@@ -136,6 +136,16 @@ ID_PASS_OVER_PROBE = 32.0
 #: ... and the stages after its traces (OIDN on the grid, the reconstruction)
 #: this many seconds a pixel (0.29-0.38 us warm on the gallery at 400-512 px).
 FINISH_PER_PIXEL = 0.45e-6
+#: A process's first preview: its stages after the grid but OIDN took at most
+#: (fixed seconds, seconds a pixel), and its OIDN call on the grid at most
+#: :data:`PREVIEW_FIRST_OIDN` times the call's expected time
+#: (``examples/first_calls.py --previews 256 384 512 768``, two runs on the
+#: AMD VM of docs/BENCHMARKS.md: 0.018-0.114 s, 0.70-1.87 times).  Their sum
+#: bounds those stages where it is less than :data:`FINISH_PER_PIXEL`'s bound
+#: (from about 450 px a side: 0.12 s against 0.14 s at 512 px, where they took
+#: 0.07-0.10 s).
+PREVIEW_FIRST_REST = (0.036, 0.14e-6)
+PREVIEW_FIRST_OIDN = 2.0
 #: What a preview's reconstruction without OIDN (mode ``fast``) is expected
 #: to take per image pixel in a fresh process: this much, plus
 #: :data:`RECONSTRUCTION_PER_EDGE` times the share of the grid's samples on an
@@ -687,9 +697,10 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer) -> 
     denoised previews' of ``key`` (:data:`_preview_after_s`); before OIDN's
     first call at the preview's quality, the longest that earlier processes'
     first previews of the scene took (:func:`_recalled_preview_after`),
-    where remembered; else :data:`FINISH_PER_PIXEL`'s bound (before that
-    first call, its expected time on top, which holds its set-up), or where
-    less, the largest time per pixel beyond OIDN of this process's last
+    where remembered; else a bound: :data:`FINISH_PER_PIXEL`'s, before that
+    first call with its expected time on top (which holds its set-up) and at
+    most :data:`PREVIEW_FIRST_REST`'s and :data:`PREVIEW_FIRST_OIDN`'s; or
+    where less, the largest time per pixel beyond OIDN of this process's last
     previews (:data:`_preview_rate`) and OIDN's expected time."""
     kept = _preview_after_s.get(key)
     if kept:
@@ -701,6 +712,9 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer) -> 
     if recalled is not None:
         return recalled
     bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)
+    if first_call:  # (what a fresh process's first previews took: less from about 450 px)
+        fixed, per_pixel = PREVIEW_FIRST_REST
+        bound = min(bound, fixed + per_pixel * pixels + PREVIEW_FIRST_OIDN * oidn)
     return min(bound, max(_preview_rate) * pixels + oidn) if _preview_rate else bound
 
 

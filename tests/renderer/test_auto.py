@@ -1862,6 +1862,7 @@ def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(sc
     monkeypatch.setattr(auto_limit, "_preview_after_s", {})
     monkeypatch.setattr(auto_limit, "_preview_due", lambda *args: True)
     monkeypatch.setattr(auto_limit, "FINISH_PER_PIXEL", 1.0)  # a bound of days: never the least
+    monkeypatch.setattr(auto_limit, "PREVIEW_FIRST_REST", (1e6, 0.0))
     for _ in range(2):  # (the grid's kernels recorded: a pooled launch replays them)
         mitsuba_mrt.render(scene, time_limit=10.0)
     pixels = 512 * 512
@@ -1882,6 +1883,24 @@ def test_a_first_preview_of_a_scene_leaves_what_other_previews_took_per_pixel(sc
     # a process that has made no preview: the bound, here without OIDN
     auto_limit._preview_rate.clear()
     assert not mitsuba_mrt.render(scene, time_limit=10.0).auto.choice.denoise
+
+
+def test_a_fresh_process_s_first_preview_leaves_the_least_of_two_bounds(monkeypatch):
+    monkeypatch.setattr(auto_limit, "_preview_after_s", {})
+    monkeypatch.setattr(auto_limit, "_preview_rate", [])
+    monkeypatch.setattr(auto_limit, "denoise_seconds", lambda *args: None)  # (no call yet)
+    monkeypatch.setattr(auto_limit, "expected_seconds", lambda count, quality: 0.025)
+    monkeypatch.setattr(auto_limit, "_recalled_preview_after", lambda *args: None)
+    fixed, per_pixel = auto_limit.PREVIEW_FIRST_REST
+
+    def after(side):
+        return auto_limit._preview_after(("key",), grid_pattern(side, side, 0.1), "auto", None)
+    # a small image: the per-pixel bound, OIDN's first call on top
+    assert after(256) == pytest.approx(auto_limit.FINISH_PER_PIXEL * 256 ** 2 + 0.025)
+    # a large one: what fresh previews took, less
+    line = fixed + per_pixel * 768 ** 2 + auto_limit.PREVIEW_FIRST_OIDN * 0.025
+    assert after(768) == pytest.approx(line)
+    assert line < auto_limit.FINISH_PER_PIXEL * 768 ** 2 + 0.025
 
 
 def test_a_fresh_preview_s_later_stages_are_remembered_for_later_processes(tmp_path,
@@ -1920,6 +1939,7 @@ def test_a_process_s_first_preview_leaves_what_an_earlier_process_s_first_took(
     assert first.auto.reason == auto_limit.PREVIEW_REASON and first.auto.choice.denoise
     # the next process: what the first took after its grid, not the bound (days)
     monkeypatch.setattr(auto_limit, "FINISH_PER_PIXEL", 1.0)
+    monkeypatch.setattr(auto_limit, "PREVIEW_FIRST_REST", (1e6, 0.0))
     clear_caches()
     again = mitsuba_mrt.render(scene, time_limit=10.0)
     assert again.auto.choice.denoise and again.spp == PREVIEW_MAX_SPP
