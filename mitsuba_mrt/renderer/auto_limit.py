@@ -295,6 +295,7 @@ def remember_launches(key: tuple, tracer) -> None:
     cost = _launch_costs.get(key)
     if cost is not None and cost.memory_due() and memory.enabled():
         memory.remember(_memory_key(key, tracer), cost.memory())
+        cost.note_remembered()
 
 
 def _remember_probe(key: tuple, tracer, probed: "_Probe", count: int) -> None:
@@ -711,10 +712,10 @@ def _preview_after(key: tuple, pattern: SamplePattern, quality: str, tracer) -> 
     recalled = _recalled_preview_after(key, tracer, quality, pattern.count) if first_call else None
     if recalled is not None:
         return recalled
-    bound = FINISH_PER_PIXEL * pixels + (oidn if first_call else 0.0)
+    bound = FINISH_PER_PIXEL * pixels
     if first_call:  # (what a fresh process's first previews took: less from about 450 px)
         fixed, per_pixel = PREVIEW_FIRST_REST
-        bound = min(bound, fixed + per_pixel * pixels + PREVIEW_FIRST_OIDN * oidn)
+        bound = min(bound + oidn, fixed + per_pixel * pixels + PREVIEW_FIRST_OIDN * oidn)
     return min(bound, max(_preview_rate) * pixels + oidn) if _preview_rate else bound
 
 

@@ -168,8 +168,9 @@ class LaunchCost:
     #: Dr.Jit's disk cache holds their kernels once a scene's earlier
     #: time-limited renders have launched them (a first launch compiles them).
     ladder: frozenset = frozenset()
-    #: The (spp, recorded) of this process's launches that :meth:`memory`
-    #: gave, and how many launches were added since (:meth:`memory_due`).
+    #: The (spp, recorded) of this process's launches when they were last
+    #: remembered (:meth:`note_remembered`), and how many were added since
+    #: (:meth:`memory_due`).
     remembered: frozenset = frozenset()
     since_remembered: int = 0
 
@@ -178,26 +179,30 @@ class LaunchCost:
 
     def memory(self) -> dict:
         """The launches, as :mod:`mitsuba_mrt.runtime.memory` keeps them for
-        later processes (:meth:`from_memory`); :meth:`memory_due` is False
-        until another launch is due to be kept."""
-        self.remembered = self._kinds_here()
-        self.since_remembered = 0
+        later processes (:meth:`from_memory`)."""
         return {"spp_compiles": self.spp_compiles,
                 "launches": [list(launch[:6]) for launch in self.launches]}
 
+    def note_remembered(self) -> None:
+        """Note that :meth:`memory` was kept: :meth:`memory_due` is False
+        until another launch is due to be."""
+        self.remembered = self._kinds_here()
+        self.since_remembered = 0
+
     def memory_due(self) -> bool:
         """Whether later processes lack what this one learnt: a launch of a
-        kind (spp, recorded) since :meth:`memory` last gave the launches, or
-        as many launches as it keeps (their window moved on).  A scene
-        rendered again and again writes its memory once in so many renders.
+        kind (spp, recorded) since the launches were last remembered
+        (:meth:`note_remembered`), or as many launches as it keeps (their
+        window moved on).  A scene rendered again and again writes its
+        memory once in so many renders.
 
         Examples
         --------
         >>> cost = LaunchCost(); cost.add(8, 0.2, recorded=True); cost.memory_due()
         True
-        >>> _ = cost.memory(); cost.add(8, 0.1); cost.memory_due()
+        >>> cost.note_remembered(); cost.add(8, 0.1); cost.memory_due()
         True
-        >>> _ = cost.memory(); cost.add(8, 0.1); cost.memory_due()
+        >>> cost.note_remembered(); cost.add(8, 0.1); cost.memory_due()
         False
         """
         return self.launched_here and (not self._kinds_here() <= self.remembered
