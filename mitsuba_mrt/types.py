@@ -16,6 +16,7 @@ import numpy as np
 
 from .errors import MRTError
 from .recon.denoise import QUALITIES
+from .recon.edges import check_filter_sigma
 from .recon.ids import ID_RULES, encode_ids
 from .recon.sampling import check_fraction
 
@@ -35,7 +36,7 @@ class MRTParams:
     sample_fraction : float
         Fraction of the pixels traced on the grid, in (0, 1].
     filter_sigma : float
-        Sigma (pixels) of the Gaussian id smoothing, >= 0.
+        Sigma (pixels) of the Gaussian id smoothing, in [0, 100].
     filter_cutoff : float
         Normalised cutoff of the id smoothing, in [0, 1].
     max_inpoints : int
@@ -89,8 +90,7 @@ class MRTParams:
 
     def __post_init__(self):
         check_fraction("sample_fraction", self.sample_fraction)
-        if not (math.isfinite(self.filter_sigma) and self.filter_sigma >= 0):
-            raise MRTError(f"filter_sigma must be a finite number >= 0, got {self.filter_sigma}")
+        check_filter_sigma(self.filter_sigma)
         if not 0.0 <= self.filter_cutoff <= 1.0:
             raise MRTError(f"filter_cutoff must be in [0, 1], got {self.filter_cutoff}")
         if int(self.max_inpoints) != self.max_inpoints or self.max_inpoints < 1:

@@ -256,6 +256,12 @@ def id_boxes(ids: np.ndarray) -> dict:
             for v, a, b, c, d in zip(labels, r0, r1, c0, c1)}
 
 
+#: The widest id smoothing, pixels: the report's is 1, and its taps (8 sigma
+#: + 1) are blurred over every pixel of an id's box, per id.  Beyond this the
+#: blur takes minutes, and far beyond it the taps alone exhaust the memory.
+FILTER_SIGMA_MAX = 100.0
+
+
 def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
                filter_cutoff: float = 0.05, background: int = 0,
                boxes: dict | None = None, order=None) -> np.ndarray:
@@ -277,7 +283,8 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
     ----------
     ids : ndarray of int, shape (height, width)
     filter_sigma : float
-        Gaussian standard deviation in pixels, >= 0 (0 leaves ids as they are).
+        Gaussian standard deviation in pixels, in [0, :data:`FILTER_SIGMA_MAX`]
+        (0 leaves ids as they are).
     filter_cutoff : float
         Normalised threshold in [0, 1].
     boxes : dict, optional
@@ -297,8 +304,7 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
     """
     filter_sigma = float(filter_sigma)
     filter_cutoff = float(filter_cutoff)
-    if not filter_sigma >= 0.0 or not np.isfinite(filter_sigma):
-        raise MRTError(f"filter_sigma must be a finite number >= 0, got {filter_sigma}")
+    check_filter_sigma(filter_sigma)
     if not 0.0 <= filter_cutoff <= 1.0:
         raise MRTError(f"filter_cutoff must be in [0, 1], got {filter_cutoff}")
     out = np.array(ids, copy=True)
@@ -333,6 +339,21 @@ def smooth_ids(ids: np.ndarray, filter_sigma: float = 1.0,
             np.copyto(out[r0:r1, c0:c1], value,
                       where=blurred >= least_above(filter_cutoff, peak))
     return out
+
+
+def check_filter_sigma(value: float) -> None:
+    """MRTError unless ``value`` is a number in [0, :data:`FILTER_SIGMA_MAX`].
+
+    Examples
+    --------
+    >>> check_filter_sigma(1.5)
+    >>> check_filter_sigma(1e9)
+    Traceback (most recent call last):
+    ...
+    mitsuba_mrt.errors.MRTError: filter_sigma must be in [0, 100], got 1000000000.0
+    """
+    if not 0.0 <= value <= FILTER_SIGMA_MAX:  # (NaN too)
+        raise MRTError(f"filter_sigma must be in [0, {FILTER_SIGMA_MAX:g}], got {value}")
 
 
 def geometric_order(sample_ids: np.ndarray) -> np.ndarray:

@@ -108,7 +108,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
        - Fraction of the pixels traced, in (0, 1] (Default: 0.1).
      * - filter_sigma
        - |float|
-       - Sigma in pixels of the Gaussian id smoothing (Default: 1).
+       - Sigma in pixels of the Gaussian id smoothing, in [0, 100] (Default: 1).
      * - filter_cutoff
        - |float|
        - Normalised cutoff of the id smoothing (Default: 0.05).

@@ -71,6 +71,9 @@ BAD = [
     (["render", SCENES / "paper_fraction.xml", "--sample-fraction", "0"], "sample_fraction"),
     (["render", SCENES / "paper_fraction.xml", "--sample-fraction", "1.5"], "sample_fraction"),
     (["render", SCENES / "paper_fraction.xml", "--filter-sigma", "-1"], "filter_sigma"),
+    # (its taps alone would take 60 GiB: a MemoryError, exit status 1, before the bound)
+    (["render", SCENES / "paper_fraction.xml", "--filter-sigma", "1e9"],
+     "filter_sigma must be in [0, 100], got 1000000000.0"),
     (["render", SCENES / "paper_fraction.xml", "--variant", "llvm_rgb"], "invalid choice"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res"], "name=value"),
     (["render", SCENES / "paper_fraction.xml", "-D", "res=abc"], "could not parse integer"),

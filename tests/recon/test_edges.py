@@ -193,8 +193,9 @@ def test_smoothing_grows_a_point_by_the_cutoff_radius():
 def test_zero_sigma_is_identity_and_bad_values_rejected():
     ids = np.arange(16).reshape(4, 4)
     assert np.array_equal(smooth_ids(ids, 0.0, 0.05), ids)
-    with pytest.raises(MRTError, match="filter_sigma"):
-        smooth_ids(ids, -1.0, 0.05)
+    for sigma in (-1.0, float("nan"), 101.0):
+        with pytest.raises(MRTError, match="filter_sigma"):
+            smooth_ids(ids, sigma, 0.05)
     with pytest.raises(MRTError, match="filter_cutoff"):
         smooth_ids(ids, 1.0, 1.5)
 
