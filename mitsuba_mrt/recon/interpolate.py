@@ -19,6 +19,14 @@ from .compose import query_workers
 from ..errors import MRTError
 from .ids import run_starts
 from .rbf import LinearRBF
+from .rbf_solve import BYTES_PER_PAIR
+from ..runtime.allocator import available_memory
+
+#: Centres of one RBF beyond which the memory its solve needs is checked
+#: (:data:`~.rbf_solve.BYTES_PER_PAIR`, 0.2 GB at this many) before it is made.
+CHECKED_CENTRES = 4096
+#: The share of the memory available that one RBF's solve may take.
+RBF_MEMORY_SHARE = 0.5
 
 #: Relative spread below which an id's samples count as all equal.
 CONSTANT_RTOL = 1e-6
@@ -103,6 +111,31 @@ def power_of_two_above(magnitude: float) -> float:
     (True, 1.0, 1.0)
     """
     return math.ldexp(1.0, math.frexp(magnitude)[1]) if magnitude > 0 else 1.0
+
+
+def check_rbf_memory(centres: int, available: int | None = None) -> None:
+    """MRTError where an RBF through ``centres`` centres would need more than
+    :data:`RBF_MEMORY_SHARE` of the memory available (``available`` bytes;
+    by default :func:`~mitsuba_mrt.runtime.allocator.available_memory`'s):
+    its dense solve grows with their square, and the report's
+    ``max_inpoints`` of 2000 bounds them for that reason.
+
+    Examples
+    --------
+    >>> check_rbf_memory(2000)
+    >>> check_rbf_memory(100_000, available=16 << 30)
+    Traceback (most recent call last):
+    ...
+    mitsuba_mrt.errors.MRTError: an RBF through 100000 centres needs 111.8 GiB for its solve, more than half the 16.0 GiB available: lower max_inpoints (the report's is 2000)
+    """
+    if centres <= CHECKED_CENTRES and available is None:
+        return
+    available = available_memory() if available is None else available
+    need = BYTES_PER_PAIR * centres * centres
+    if available is not None and need > RBF_MEMORY_SHARE * available:
+        raise MRTError(f"an RBF through {centres} centres needs {need / 2 ** 30:.1f} GiB "
+                       f"for its solve, more than half the {available / 2 ** 30:.1f} GiB "
+                       f"available: lower max_inpoints (the report's is 2000)")
 
 
 def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndarray,
@@ -190,6 +223,7 @@ def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: n
         # values over a power of two (exact): the solve and the evaluation
         # see the same numbers at any scale, and none near float overflow
         unit = power_of_two_above(float(np.abs(values).max()))
+        check_rbf_memory(len(chosen))
         rbf = LinearRBF(xy[chosen], values[chosen] / unit, degree=rbf_degree)
         out[pixels] = rbf(np.stack([pixels % width, pixels // width], axis=1)) * unit
         result.counts["rbf"] += 1

@@ -44,6 +44,10 @@ ACCEPTABLE = 1e-9
 MAX_STEPS = 30
 #: Distance triangles with at least this many rows are computed on all cores.
 PARALLEL_ROWS = 512
+#: Bytes per pair of centres that a solve holds: ``A`` in float64 and its
+#: negation in float32 (:func:`distance_triangles`; float64 LU, the rare
+#: fallback, holds several float64 copies more).
+BYTES_PER_PAIR = 12
 #: Rows of the distance triangle per ``cdist`` call (a block stays in cache
 #: while it is copied and negated).
 CHUNK_ROWS = 64

@@ -11,6 +11,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import MRTError, MRTWarning
+from ..runtime.allocator import available_memory
 from ..types import MRTParams, is_integer
 
 #: Memory a render needs per pixel, roughly: the traced AOVs, the modes' images
@@ -94,22 +95,6 @@ def _first_line(exc: Exception) -> str:
         items = [lines[1]] + [line for line in lines[2:] if line.startswith("-")]
         return f"{lines[0]} " + ", ".join(item.lstrip("- ").strip() for item in items)
     return lines[0]
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available to a new allocation (``MemAvailable``), else
-    the physical memory, else None."""
-    try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
 
 
 def check_film(scene: mi.Scene, sensor: int = 0, available: int | None = None) -> None:

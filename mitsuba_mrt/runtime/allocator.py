@@ -1,4 +1,5 @@
-"""The process's memory: glibc's malloc keeps freed memory, NumPy asks for no huge pages.
+"""The process's memory: glibc's malloc keeps freed memory, NumPy asks for no huge pages;
+how much memory a new allocation may take (:func:`available_memory`).
 
 A reconstruction allocates and frees tens of large temporaries (about
 100 MB at 1000 x 1000).  With glibc's default, adaptive thresholds much of
@@ -95,3 +96,19 @@ def no_huge_pages() -> bool:
         from numpy.core import multiarray
     advise = getattr(multiarray, "_set_madvise_hugepage", None)
     return bool(advise(False)) if advise is not None else False
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (``MemAvailable``), else
+    the physical memory, else None."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None

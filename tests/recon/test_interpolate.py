@@ -118,3 +118,17 @@ def test_rbf_of_huge_values_is_finite():
     res = interpolate_regions(ids, xy, np.ones(len(xy), int), values, rbf_degree=1)
     assert np.isfinite(res.values).all()
     assert np.allclose(res.values.reshape(-1, 3), values, rtol=1e-9)
+
+
+def test_an_rbf_too_large_for_the_memory_is_refused_before_its_solve(monkeypatch):
+    # --max-inpoints 1e8 on a 1000-px image: an id of 40,000 samples would
+    # allocate 19 GB for its solve (a MemoryError or the kernel's OOM killer)
+    from mitsuba_mrt.recon import interpolate
+    monkeypatch.setattr(interpolate, "CHECKED_CENTRES", 0)
+    monkeypatch.setattr(interpolate, "available_memory", lambda: 2 * 12 * 50 * 50)
+    ids = np.zeros((20, 20), dtype=int)
+    xy = np.stack(np.meshgrid(np.arange(0, 20, 2), np.arange(0, 20, 2)), -1).reshape(-1, 2)
+    values = (xy[:, :1] + 1.0) * np.ones((1, 3))
+    interpolate_regions(ids, xy, np.zeros(len(xy), int), values, max_inpoints=50)
+    with pytest.raises(MRTError, match="an RBF through 100 centres needs .* lower max_inpoints"):
+        interpolate_regions(ids, xy, np.zeros(len(xy), int), values, max_inpoints=100)
