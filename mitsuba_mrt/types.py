@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import enum
 import math
+import numbers
 from collections import Counter
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Protocol
@@ -25,6 +26,14 @@ from .recon.sampling import check_fraction
 DENOISERS = ("none", "oidn")
 #: ``denoise_quality``'s settings: ``auto``, then OIDN's presets, fastest first.
 DENOISE_QUALITIES = ("auto",) + QUALITIES
+
+
+#: :class:`MRTParams`' numeric fields (kept as Python numbers); of them, those
+#: that are integers and those that may be None.
+_NUMBERS = ("sample_fraction", "filter_sigma", "filter_cutoff", "max_inpoints", "num_cappoints",
+            "rbf_degree", "noise_smoothing", "time_limit", "noise_threshold")
+_INTEGERS = ("max_inpoints", "num_cappoints", "rbf_degree")
+_OPTIONAL = ("time_limit", "noise_threshold")
 
 
 @dataclass(frozen=True)
@@ -89,6 +98,17 @@ class MRTParams:
     noise_threshold: float | None = None
 
     def __post_init__(self):
+        for name in _NUMBERS:  # (Python floats: a NumPy scalar or an int is taken as one)
+            value = getattr(self, name)
+            if name in _OPTIONAL and value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                what = "a finite number > 0" if name in _OPTIONAL else "a number"
+                raise MRTError(f"{name} must be {what}, got {value!r}")
+            if name not in _INTEGERS:
+                object.__setattr__(self, name, float(value))
+            elif float(value).is_integer():  # (else refused below)
+                object.__setattr__(self, name, int(value))
         check_fraction("sample_fraction", self.sample_fraction)
         check_filter_sigma(self.filter_sigma)
         if not 0.0 <= self.filter_cutoff <= 1.0:
@@ -112,9 +132,7 @@ class MRTParams:
                            f"got {self.noise_smoothing}")
         for name in ("time_limit", "noise_threshold"):
             value = getattr(self, name)
-            if value is not None and not (isinstance(value, (int, float))
-                                          and not isinstance(value, bool)
-                                          and math.isfinite(value) and value > 0):
+            if value is not None and not (math.isfinite(value) and value > 0):
                 raise MRTError(f"{name} must be a finite number > 0, got {value}")
 
     def rule_for(self, mode: str) -> str:
@@ -127,6 +145,10 @@ class MRTParams:
         """A copy with some fields changed (None values are ignored); these
         same parameters where none is."""
         changes = {k: v for k, v in changes.items() if v is not None}
+        unknown = sorted(set(changes) - {f.name for f in fields(self)})
+        if unknown:
+            raise MRTError(f"unknown MRT parameter {unknown[0]!r}; the parameters are "
+                           f"{', '.join(f.name for f in fields(self))}")
         return replace(self, **changes) if changes else self
 
     def as_dict(self) -> dict:
