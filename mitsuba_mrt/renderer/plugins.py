@@ -182,8 +182,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
             raise MRTError(f"mrt: unknown properties {', '.join(unknown)} (give them to the "
                            f"nested integrator)")
         # Reconstruction parameters, validated once here.
-        self.params = MRTParams(**{name: (float if f.default is None else type(f.default))(
-            props[name]) for name, f in own.items() if name in names})
+        self.params = MRTParams(**{name: _parameter(name, props[name], f.default)
+                                   for name, f in own.items() if name in names})
         # Reconstruction mode (see mitsuba_mrt.renderer.api.render).
         self.mode = check_mode(str(props.get("mode", "auto")), render_modes())
         check_controls(self.mode, self.params)
@@ -215,6 +215,21 @@ class MRTIntegrator(mi.SamplingIntegrator):
     def to_string(self):
         fields = ", ".join(f"{k}={v}" for k, v in self.params.as_dict().items())
         return f"MRTIntegrator[{fields},\n  nested={self.nested}]"
+
+
+def _parameter(name: str, value, default):
+    """An :class:`MRTParams` field from the XML property ``value``: text for
+    the text fields, else a number (a ``<string>`` property read as one), which
+    :class:`MRTParams` checks (an ``<integer>`` field given a non-integral
+    ``<float>`` is refused there, not truncated)."""
+    if isinstance(default, str):
+        return str(value)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            raise MRTError(f"{name} must be a number, got {value!r}") from None
+    return value
 
 
 def _default_nested(names: list, props) -> mi.Integrator:

@@ -1,5 +1,7 @@
 """The Mitsuba side: matte shading, the sparse trace, the mrt plugin."""
 
+import re
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -178,12 +180,27 @@ def test_mrt_plugin_fills_the_film(variant, use_scalar):
 
 
 def test_mrt_plugin_rejects_bad_parameters(variant):
-    for name, value, message in [("sample_fraction", "0", "sample_fraction"),
-                                 ("filter_sigma", "-1", "filter_sigma")]:
-        xml = small_scene_xml(8, integrator=f'<integrator type="mrt"><float name="{name}" '
+    for kind, name, value, message in [
+            ("float", "sample_fraction", "0", "sample_fraction"),
+            ("float", "filter_sigma", "-1", "filter_sigma"),
+            # (int() truncated these to 2 and 0; the text raised a ValueError, the bool became 1.0)
+            ("float", "max_inpoints", "2.5", "max_inpoints must be an integer >= 1, got 2.5"),
+            ("float", "num_cappoints", "-0.5", "num_cappoints must be an integer >= 0, got -0.5"),
+            ("string", "max_inpoints", "abc", "max_inpoints must be a number, got 'abc'"),
+            ("boolean", "sample_fraction", "true", "sample_fraction must be a number, got True")]:
+        xml = small_scene_xml(8, integrator=f'<integrator type="mrt"><{kind} name="{name}" '
                                             f'value="{value}"/></integrator>')
-        with pytest.raises(Exception, match=message):
+        with pytest.raises(Exception, match=re.escape(message)):
             mi.load_string(xml)
+
+
+def test_mrt_plugin_reads_numbers_of_any_xml_type(variant):
+    xml = small_scene_xml(8, integrator="""<integrator type="mrt">
+        <string name="sample_fraction" value="0.25"/><float name="max_inpoints" value="50"/>
+        <integer name="filter_sigma" value="2"/></integrator>""")
+    params = mi.load_string(xml).integrator().params
+    assert (params.sample_fraction, params.max_inpoints, params.filter_sigma) == (0.25, 50, 2.0)
+    assert type(params.max_inpoints) is int and type(params.filter_sigma) is float
 
 
 def test_mrt_plugin_with_path_integrator(variant):
