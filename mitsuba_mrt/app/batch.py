@@ -86,11 +86,13 @@ def run_batch(scenes, out_dir, defines=(), *, scheduler: str | None = None,
     row read back from their JSON); a failed task is a row with status
     ``failed`` and its message, and the batch goes on.  Ctrl-C cancels the
     tasks not yet done and still writes the table (status ``pending`` for
-    those).
+    those).  Where the cluster cannot be reached nothing is written (the
+    folder, where this call made it, is removed again).
     """
     check_cluster_options(scheduler, workers)
     tasks = plan_tasks(scenes, Sweep.parse(defines), job_options)
     out = Path(out_dir)
+    created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -107,21 +109,28 @@ def run_batch(scenes, out_dir, defines=(), *, scheduler: str | None = None,
             else ""))
     columns = table_columns(tasks)
     table = out / TABLE_NAME
+    reached: list = []  # (non-empty once the cluster is: a table is then written, whatever follows)
     try:
         if todo:
-            _run_on_cluster(todo, out, rows, scheduler, workers, progress, echo)
+            _run_on_cluster(todo, out, rows, scheduler, workers, progress, echo, reached)
     finally:
         ordered = [rows.get(t.name) or pending_row(t) for t in tasks]
-        write_table(table, ordered, columns)
+        if reached or not todo:
+            write_table(table, ordered, columns)
+        elif created and not any(out.iterdir()):  # no cluster, nothing rendered: no folder
+            out.rmdir()
     frames, notes = animations(tasks, rows, out)
     gifs, unwritten = write_animations(frames, out)
     return BatchResult(ordered, table, gifs, notes + unwritten)
 
 
-def _run_on_cluster(todo, out: Path, rows: dict, scheduler, workers, progress, echo) -> None:
-    """Run ``todo`` on the cluster, each finished task's row into ``rows``."""
+def _run_on_cluster(todo, out: Path, rows: dict, scheduler, workers, progress, echo,
+                    reached: list) -> None:
+    """Run ``todo`` on the cluster, each finished task's row into ``rows``
+    (``reached`` gets an item once the cluster is connected)."""
     as_completed = require_distributed().as_completed
     with cluster_client(scheduler, workers, echo) as (client, jit_threads):
+        reached.append(True)
         def submit(task):
             return client.submit(run_task, task, os.fspath(out), jit_threads,
                                  key=f"render-{task.name}-{uuid.uuid4().hex[:8]}",

@@ -123,6 +123,25 @@ def test_without_dask_one_line_and_exit_2(monkeypatch, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_cluster_that_cannot_be_reached_leaves_no_output(monkeypatch, tmp_path):
+    # (the table of pending tasks was written into a new folder: --scheduler tcp://nowhere:1)
+    from mitsuba_mrt.app import batch
+
+    @contextlib.contextmanager
+    def unreachable(scheduler, workers, echo):
+        raise MRTError(f"cannot connect to the Dask scheduler at {scheduler}: refused")
+        yield
+    monkeypatch.setattr(batch, "cluster_client", unreachable)
+    with pytest.raises(MRTError, match="cannot connect"):
+        run_batch([FIG1], tmp_path / "out", scheduler="tcp://127.0.0.1:1", echo=lambda line: None)
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "kept").mkdir()  # a folder the user made stays, empty
+    with pytest.raises(MRTError, match="cannot connect"):
+        run_batch([FIG1], tmp_path / "kept", scheduler="tcp://127.0.0.1:1",
+                  echo=lambda line: None)
+    assert list((tmp_path / "kept").iterdir()) == []
+
+
 # -- a batch on a local cluster --------------------------------------------------------------
 
 SPREAD = ["-D", "res=16,24", "-D", "spp=1,4", "--mode", "fast"]
