@@ -9,8 +9,8 @@ and the image's pixel count), in one JSON file in Dr.Jit's kernel cache
 folder (``~/.drjit``): the kernels those launches compiled are there too,
 and clearing the folder forgets both.  Nothing is read or written on import.
 
-``MITSUBA_MRT_MEMORY=off`` switches it off (the test suite does);
-``MITSUBA_MRT_MEMORY=PATH`` keeps the file at ``PATH``.  A file that cannot
+``MITSUBA_MRT_MEMORY=off`` switches it off (the test suite does; so do
+``0``, ``false`` and ``no``); ``MITSUBA_MRT_MEMORY=PATH`` keeps the file at ``PATH``.  A file that cannot
 be read or written is as no file: the render plans from its own measures.
 """
 
@@ -27,6 +27,9 @@ FILE_NAME = "mitsuba-mrt-memory.json"
 KEPT_SCENES = 64
 #: The file's format; a file of another is ignored, and replaced when written.
 VERSION = 1
+#: ``MITSUBA_MRT_MEMORY`` values that switch the memory off (any case): a
+#: user who writes ``0`` means off, not a file named 0 in the working folder.
+OFF = ("off", "0", "false", "no")
 
 
 def path() -> Path | None:
@@ -40,15 +43,17 @@ def enabled() -> bool:
 
 
 def file_for(setting: str) -> Path | None:
-    """The file a ``MITSUBA_MRT_MEMORY`` value names: none for ``off``, the
-    file in Dr.Jit's kernel cache folder for an empty value.
+    """The file a ``MITSUBA_MRT_MEMORY`` value names: none for :data:`OFF`'s,
+    the file in Dr.Jit's kernel cache folder for an empty value.
 
     Examples
     --------
-    >>> file_for("off") is None, str(file_for("/tmp/m.json")), file_for("").name
-    (True, '/tmp/m.json', 'mitsuba-mrt-memory.json')
+    >>> file_for("off") is None, file_for("0") is None, str(file_for("/tmp/m.json"))
+    (True, True, '/tmp/m.json')
+    >>> file_for("").name
+    'mitsuba-mrt-memory.json'
     """
-    if setting.lower() == "off":
+    if setting.strip().lower() in OFF:
         return None
     return Path(setting) if setting else Path.home() / ".drjit" / FILE_NAME
 

@@ -47,3 +47,12 @@ def test_off_reads_and_writes_nothing_and_an_unwritable_place_is_no_error(tmp_pa
     monkeypatch.setenv("MITSUBA_MRT_MEMORY", str(blocker / "memory.json"))  # (under a file)
     memory.remember("a", {"x": 1})
     assert memory.recall("a") is None
+
+
+@pytest.mark.parametrize("setting", ["0", "false", "No", " OFF "])
+def test_the_usual_words_for_off_are_off(setting, tmp_path, monkeypatch):
+    # (MITSUBA_MRT_MEMORY=0 wrote a memory file named 0 in the working folder)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MITSUBA_MRT_MEMORY", setting)
+    memory.remember("a", {"x": 1})
+    assert not memory.enabled() and list(tmp_path.iterdir()) == []
