@@ -126,7 +126,7 @@ def check_rbf_memory(centres: int, available: int | None = None) -> None:
     >>> check_rbf_memory(100_000, available=16 << 30)
     Traceback (most recent call last):
     ...
-    mitsuba_mrt.errors.MRTError: an RBF through 100000 centres needs 111.8 GiB for its solve, more than half the 16.0 GiB available: lower max_inpoints (the report's is 2000)
+    mitsuba_mrt.errors.MRTError: an RBF through 100000 centres needs 111.8 GiB for its solve, more than 50% of the 16.0 GiB available: lower max_inpoints (the report's is 2000)
     """
     if centres <= CHECKED_CENTRES and available is None:
         return
@@ -134,8 +134,9 @@ def check_rbf_memory(centres: int, available: int | None = None) -> None:
     need = BYTES_PER_PAIR * centres * centres
     if available is not None and need > RBF_MEMORY_SHARE * available:
         raise MRTError(f"an RBF through {centres} centres needs {need / 2 ** 30:.1f} GiB "
-                       f"for its solve, more than half the {available / 2 ** 30:.1f} GiB "
-                       f"available: lower max_inpoints (the report's is 2000)")
+                       f"for its solve, more than {RBF_MEMORY_SHARE:.0%} of the "
+                       f"{available / 2 ** 30:.1f} GiB available: lower max_inpoints "
+                       f"(the report's is 2000)")
 
 
 def interpolate_regions(id_map: np.ndarray, sample_xy: np.ndarray, sample_ids: np.ndarray,

@@ -33,7 +33,8 @@ from .held_out import check_image
 from .lanes import is_jit
 from .pilot import effective_area
 from .pipeline import mrt_image
-from .replay import Recorded, recorded_so_far, recording_seconds, recordings
+from .replay import (Recorded, recorded_during, recorded_so_far, recording_seconds,
+                     recordings)
 from .scene import resolve_sensor, unwrap
 from .trace import pass_recorded, scene_warm, trace_pixels
 
@@ -268,9 +269,9 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     if outcome.preview_key is not None:  # (at the preset its time was planned at)
         run = auto_limit.preview_params(run)
     begin = time.perf_counter()
-    before = recording_seconds()  # (what its grid's recording takes: its kept share's)
-    grid = outcome.grid if outcome.grid is not None else _grid_trace(planned, pattern)
-    grid_recording_s = recording_seconds() - before
+    with recorded_during() as made:  # (what its grid's recording takes: its kept share's)
+        grid = outcome.grid if outcome.grid is not None else _grid_trace(planned, pattern)
+    grid_recording_s = made.seconds
     result = _mrt(pattern, planned, run, choice.mode, plan, start, progress or _quiet, grid)
     if outcome.check:  # an MRT image chosen without a pilot: kept if its check says so
         return _checked(result, scene, pattern, tracer, params, start, recorded, progress,

@@ -41,7 +41,7 @@ from .auto_plans import (EDGE_TESTED, HOME, HOME_MIN_SPP, AutoOutcome, Traced, e
                          find_surfaces, trace_id_pass, unmeasured_plan)
 from .preview import preview_grid
 from .launch_cost import LaunchCost
-from .replay import recording_seconds, recordings
+from .replay import recorded_during
 from .scene_query import (description_key, sample_count_at_most, sampler_bakes_spp,
                           textured_diffuse_shapes)
 
@@ -827,15 +827,14 @@ def _grid_probe(pattern: SamplePattern, tracer) -> _Probe:
     time scaled to every pixel, times :data:`PASS_OVER_GRID`, plus what the
     trace took beyond its kernels (launching them, reading them back, and
     in a fresh process the first use of the scene and the kernels)."""
-    begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
-    with kernel_seconds() as spent:
+    begin = time.perf_counter()
+    with kernel_seconds() as spent, recorded_during() as made:
         grid = replace(tracer, spp=PREVIEW.spp)(pattern.pixel_xy, stream=SeedStream.GRID,
                                                 replay=True)
     host = max(time.perf_counter() - begin - spent.execute, 0.0)
     pass_s = _pass_seconds(host, spent.execute, pattern.width * pattern.height, pattern.count)
-    return _Probe(grid, pass_s, spent.execute, host, recordings() > recorded,
-                  min(spent.compile, host), recorded == 0 < recordings(),
-                  recording_seconds() - recording)
+    return _Probe(grid, pass_s, spent.execute, host, made.count > 0,
+                  min(spent.compile, host), made.first, made.seconds)
 
 
 def _pass_seconds(host: float, execute: float, pixels: int, count: int) -> float:

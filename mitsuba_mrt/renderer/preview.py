@@ -20,7 +20,7 @@ import numpy as np
 from ..recon.sampling import SamplePattern
 from ..types import SeedStream, SparseTrace
 from .develop import sample_variance
-from .replay import recording_seconds
+from .replay import recorded_during
 
 #: The most 1-spp launches a preview's grid pools: a bound the time rarely
 #: leaves room for (a preview is taken where one pass of every pixel does not
@@ -77,9 +77,9 @@ def preview_grid(grid: SparseTrace | None, pattern: SamplePattern, tracer,
     replay's time)."""
     one = replace(tracer, spp=1)
     if grid is None:
-        before = recording_seconds()
-        grid = one(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
-        recording_s = recording_seconds() - before
+        with recorded_during() as made:
+            grid = one(pattern.pixel_xy, stream=SeedStream.GRID, replay=True)
+        recording_s = made.seconds
     traces, step = [grid], max(grid.seconds - recording_s, 0.0)
     while len(traces) < PREVIEW_MAX_SPP and time.perf_counter() + step <= until:
         begin = time.perf_counter()

@@ -65,7 +65,7 @@ from ..types import SeedStream
 from .held_out import lanes_noise, noise_lanes, spread
 from .launch_cost import ROUND_SAFETY, LaunchCost
 from .pixel_filter import pixel_weights, through_filter
-from .replay import recording_seconds, recordings
+from .replay import recorded_during
 from .scene_query import sample_count_at_most, sampler_bakes_spp
 
 #: Passes of the first round (the fewest that give a variance and two halves).
@@ -566,18 +566,17 @@ def _launch(passes: Passes, tracer, xy: np.ndarray, spp: int, launch: int, half:
     recorded: a time limit alone traces no companion, and plans its
     launches from these."""
     guides, noise = passes.count < passes.guide_spp, passes.noise_due is not None
-    begin, recorded, recording = time.perf_counter(), recordings(), recording_seconds()
-    count = passes.count
-    with kernel_seconds() as spent:
+    begin, count = time.perf_counter(), passes.count
+    with kernel_seconds() as spent, recorded_during() as made:
         share = _trace_pass(passes, tracer, xy, spp, launch, half, guides)
     seconds = time.perf_counter() - begin
     # the spp the sampler took (a square for some); a recording call traces the
     # kernels, which run, or compile, when read back after it
-    recording_s = recording_seconds() - recording
+    recording_s = made.seconds
     alone = recording_s + share * (seconds - recording_s)
     if noise:  # (the noise's lanes: Passes.noise_s)
         passes.noise_s = (1.0 - share) * (seconds - recording_s)
-    cost.add(passes.count - count, alone, recordings() > recorded, spent.compile,
+    cost.add(passes.count - count, alone, made.count > 0, spent.compile,
              None if not spent.widest else share * spent.widest, recording_s=recording_s)
     return seconds
 

@@ -34,6 +34,7 @@ import math
 import sys
 import time
 from collections import OrderedDict
+from dataclasses import dataclass
 from typing import Callable, NamedTuple
 
 import drjit as dr
@@ -102,6 +103,38 @@ class Recorded(NamedTuple):
 def recorded_so_far() -> Recorded:
     """What every :class:`Replay` has recorded so far, and in how many seconds."""
     return Recorded(recordings(), recording_seconds())
+
+
+@dataclass
+class Recording:
+    """What a :func:`recorded_during` block recorded, filled when it ends:
+    how many recordings, the seconds they took, and whether they were the
+    process's first."""
+
+    count: int = 0
+    seconds: float = 0.0
+    first: bool = False
+
+
+@contextlib.contextmanager
+def recorded_during():
+    """A :class:`Recording` of what the block records (the time a trace's
+    replays save, and whether it recorded at all).
+
+    Examples
+    --------
+    >>> with recorded_during() as made:
+    ...     pass
+    >>> made.count, made.seconds
+    (0, 0.0)
+    """
+    before, made = recorded_so_far(), Recording()
+    try:
+        yield made
+    finally:
+        made.count = recordings() - before.count
+        made.seconds = recording_seconds() - before.seconds
+        made.first = before.count == 0 < made.count
 
 
 def active() -> bool:
