@@ -92,6 +92,25 @@ def _camera_ray(sensor, sampler, position, spp, centre: bool = False):
     return ray, weight
 
 
+def nested_sample(integrator, scene, sampler, ray, active):
+    """``(value, valid)`` of one sample of the nested ``integrator`` along ``ray``.
+
+    Mitsuba's C++ integrators (``path``, ``volpath``, ...) and the MRT's own
+    take ``sample(scene, sampler, ray, medium, active)``; its differentiable
+    Python integrators (``prb``, ``prbvolpath``, ``direct_projective``, ...,
+    subclasses of ``mi.CppADIntegrator``) take an AD mode and their
+    derivatives' state, and give their primal estimate for
+    ``dr.ADMode.Primal``, as their own ``render`` asks for it.
+    """
+    if isinstance(integrator, mi.CppADIntegrator):
+        value, valid, _, _ = integrator.sample(
+            mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray, depth=mi.UInt32(0),
+            δL=None, δaovs=None, state_in=None, active=mi.Bool(active))
+        return value, valid
+    value, valid, _ = integrator.sample(scene, sampler, ray, None, active)
+    return value, valid
+
+
 def _rgb(value, wavelengths, active=True):
     """A sample's value as the RGB that ``mi.render`` develops (spectra converted)."""
     if mi.is_polarized:
@@ -433,7 +452,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
     zero = mi.Float(0.0)
     rgb, alpha, invalid = mi.Color3f(0.0), zero, zero
     if integrator is not None:
-        value, valid, _ = integrator.sample(scene, sampler, ray, None, active)
+        value, valid = nested_sample(integrator, scene, sampler, ray, active)
         rgb = _rgb(ray_weight * value, ray.wavelengths, active)
         finite = dr.all(dr.isfinite(rgb))
         invalid = dr.select(active & ~finite, 1.0, 0.0)
@@ -623,7 +642,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             ray, ray_weight = _camera_ray(sensor, sampler, mi.Point2f(px, py), spp)
             rgb, alpha, invalid = np.zeros(3), 0.0, 0.0
             if integrator is not None:
-                value, valid, _ = integrator.sample(scene, sampler, ray, None, True)
+                value, valid = nested_sample(integrator, scene, sampler, ray, True)
                 rgb = np.asarray(_rgb(ray_weight * value, ray.wavelengths), dtype=np.float64)
                 alpha = 1.0 if valid else 0.0
                 if not np.isfinite(rgb).all():

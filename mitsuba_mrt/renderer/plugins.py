@@ -12,6 +12,7 @@ from ..errors import MRTError
 from ..modes import check_controls, check_mode, render_modes
 from ..types import MRTParams
 from .aovs import AOV_NAMES, aov_images
+from .develop import nested_sample
 from .lanes import is_jit, logical_not
 from .scene_query import has_mirrors
 
@@ -207,6 +208,8 @@ class MRTIntegrator(mi.SamplingIntegrator):
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         # Per-ray queries (e.g. from another integrator) get the nested result.
+        if isinstance(self.nested, mi.CppADIntegrator):  # (prb & co.: another signature)
+            return (*nested_sample(self.nested, scene, sampler, ray, active), [])
         return self.nested.sample(scene, sampler, ray, medium, active)
 
     def aov_names(self):

@@ -210,6 +210,24 @@ def test_mrt_plugin_with_path_integrator(variant):
     assert np.isfinite(image).all() and image[..., :3].max() > 0
 
 
+@pytest.mark.parametrize("nested", ["prb", "prbvolpath", "direct_projective"])
+def test_differentiable_python_integrators_trace_their_primal_image(variant, nested):
+    # Their sample() takes an AD mode and derivative state, not (scene, sampler,
+    # ray, medium, active): every mode raised a TypeError (exit status 1)
+    xml = small_scene_xml(16, integrator=f'<integrator type="{nested}"/>')
+    scene = mi.load_string(xml)
+    reference = np.array(mi.render(scene, spp=64))[..., :3]
+    assert reference.max() > 0
+    for mode in ("fast", "refine"):
+        result = mitsuba_mrt.render(scene, spp=64, sample_fraction=1.0, mode=mode)
+        assert result.traced_mask.all()
+        assert paper_error(result.image, reference) < 0.01
+    plugin = mi.load_string(small_scene_xml(16, integrator=f"""<integrator type="mrt">
+        <integrator type="{nested}"/><string name="mode" value="fast"/></integrator>"""))
+    direct = mitsuba_mrt.render(scene, spp=64, mode="fast").image
+    assert np.allclose(np.array(mi.render(plugin, spp=64))[..., :3], direct, atol=1e-6)
+
+
 @pytest.mark.parametrize("kind", ["no_shapes", "no_lights"])
 def test_degenerate_scenes_render_without_nan(variant, kind):
     scene = mi.load_string(small_scene_xml(24, shapes=kind != "no_shapes",
