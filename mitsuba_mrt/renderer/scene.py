@@ -32,6 +32,8 @@ def load_scene(path: str | os.PathLike, **defines) -> mi.Scene:
     process (and found in Dr.Jit's disk cache).
     """
     path = os.fspath(path)
+    if os.path.isdir(path):
+        raise MRTError(f"a folder, not a scene file: {path}")
     if not os.path.isfile(path):
         raise MRTError(f"scene file not found: {path}")
     if defines:

@@ -68,6 +68,8 @@ def test_json_flag_and_no_reference(tmp_path):
 
 BAD = [
     (["render", "missing.xml"], "scene file not found"),
+    # a folder was "not found", which it is not
+    (["render", SCENES], f"a folder, not a scene file: {SCENES}"),
     (["render", SCENES / "paper_fraction.xml", "--sample-fraction", "0"], "sample_fraction"),
     (["render", SCENES / "paper_fraction.xml", "--sample-fraction", "1.5"], "sample_fraction"),
     (["render", SCENES / "paper_fraction.xml", "--filter-sigma", "-1"], "filter_sigma"),
