@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import warnings
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass
@@ -165,15 +166,50 @@ def warn_negative_emitters(scene: mi.Scene) -> list[str]:
 
 
 def resolve_sensor(scene: mi.Scene, sensor) -> mi.Sensor:
-    """``sensor`` itself, or the scene's sensor of that index (checked)."""
-    if isinstance(sensor, mi.Sensor):
-        return sensor
-    if not is_integer(sensor):
-        raise MRTError(f"sensor must be an index or a Mitsuba sensor, got {sensor!r}")
-    sensors = scene.sensors()
-    if not 0 <= int(sensor) < len(sensors):
-        raise MRTError(f"sensor index {sensor} out of range: the scene has {len(sensors)}")
-    return sensors[int(sensor)]
+    """``sensor`` itself, or the scene's sensor of that index (checked), its
+    film one the MRT renders (:func:`pixel_format`)."""
+    if not isinstance(sensor, mi.Sensor):
+        if not is_integer(sensor):
+            raise MRTError(f"sensor must be an index or a Mitsuba sensor, got {sensor!r}")
+        sensors = scene.sensors()
+        if not 0 <= int(sensor) < len(sensors):
+            raise MRTError(f"sensor index {sensor} out of range: the scene has {len(sensors)}")
+        sensor = sensors[int(sensor)]
+    pixel_format(sensor.film())
+    return sensor
+
+
+#: The ``hdrfilm`` pixel formats the MRT renders.  Its images are RGB, with
+#: alpha where the film has it; an XYZ film's full render is converted to
+#: RGB (:func:`xyz_to_rgb`), and the ``mrt`` plugin's RGB image is developed
+#: by the film into XYZ, as Mitsuba's own integrators' are.
+PIXEL_FORMATS = ("rgb", "rgba", "xyz", "xyza")
+
+
+def pixel_format(film: mi.Film) -> str:
+    """The pixel format of ``film``, one of :data:`PIXEL_FORMATS`; an MRTError
+    for another (a luminance film, whose one channel the MRT's colour
+    reconstruction cannot give), or for a film that is not an ``hdrfilm``."""
+    text = str(film)
+    found = re.search(r"\bpixel_format = (\w+)", text)
+    if not text.startswith("HDRFilm") or found is None:
+        raise MRTError(f"the film is a {text.split('[', 1)[0]}: the MRT renders an hdrfilm's "
+                       f"{', '.join(PIXEL_FORMATS)} pixel formats")
+    name = found.group(1)
+    if name not in PIXEL_FORMATS:
+        shown = {"y": "luminance", "ya": "luminance_alpha"}.get(name, name)
+        raise MRTError(f"the film's pixel_format is {shown}: the MRT renders colour "
+                       f"({', '.join(PIXEL_FORMATS)})")
+    return name
+
+
+def xyz_to_rgb(image: np.ndarray) -> np.ndarray:
+    """``image``'s first three channels from CIE XYZ to linear sRGB, in place,
+    with Mitsuba's own conversion (``mi.xyz_to_srgb``, linear: its matrix)."""
+    matrix = np.array([np.array(mi.xyz_to_srgb(mi.ScalarColor3f(*column)), dtype=np.float64)
+                       .ravel() for column in np.eye(3)]).T
+    image[..., :3] = image[..., :3] @ matrix.T
+    return image
 
 
 @dataclass

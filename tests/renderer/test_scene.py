@@ -3,12 +3,17 @@
 import warnings
 
 import mitsuba as mi
+import numpy as np
 import pytest
+
+import mitsuba_mrt
 
 from helpers import small_scene_xml
 from mitsuba_mrt import MRTError, MRTWarning
 from mitsuba_mrt.renderer import scene as scene_module
-from mitsuba_mrt.renderer.scene import BYTES_PER_PIXEL, check_film, warn_negative_emitters
+from mitsuba_mrt.renderer.api import render_reference
+from mitsuba_mrt.renderer.scene import (BYTES_PER_PIXEL, check_film, warn_negative_emitters,
+                                      xyz_to_rgb)
 
 
 def test_film_too_large_for_memory_is_refused_with_an_estimate(variant):
@@ -176,3 +181,32 @@ def test_a_scene_s_description_key_is_the_same_after_a_full_render(variant):
     before, described = key(), str(sensor)
     render_reference(scene)
     assert str(sensor) != described and key() == before
+
+
+def _film_scene(pixel_format: str, integrator: str = '<integrator type="path"/>'):
+    xml = small_scene_xml(16, integrator=integrator)
+    return mi.load_string(xml.replace(
+        '<rfilter type="box"/>',
+        f'<rfilter type="box"/><string name="pixel_format" value="{pixel_format}"/>'))
+
+
+@pytest.mark.parametrize("pixel_format", ["luminance", "luminance_alpha"])
+def test_a_luminance_film_is_refused(variant, pixel_format):
+    # its one channel was compared with the MRT's three ("image shape differs")
+    with pytest.raises(MRTError, match=f"the film's pixel_format is {pixel_format}: "
+                                       r"the MRT renders colour \(rgb, rgba, xyz, xyza\)"):
+        mitsuba_mrt.render(_film_scene(pixel_format), mode="fast")
+
+
+def test_an_xyz_film_renders_the_rgb_film_s_image(variant):
+    # mi.render's XYZ was taken for RGB: a full render, and every error
+    # against one, was in the wrong colours
+    rgb, xyz = _film_scene("rgb"), _film_scene("xyz")
+    reference = render_reference(rgb)[0]
+    assert np.allclose(render_reference(xyz)[0], reference, atol=1e-5)
+    assert (mitsuba_mrt.render(xyz, mode="fast").image
+            == mitsuba_mrt.render(rgb, mode="fast").image).all()
+    plugin = '<integrator type="mrt"><string name="mode" value="fast"/></integrator>'
+    developed = np.array(mi.render(_film_scene("xyza", plugin)))  # the film's XYZ, alpha
+    expected = np.array(mi.render(_film_scene("rgba", plugin)))
+    assert np.allclose(xyz_to_rgb(developed.astype(np.float64)), expected, atol=1e-5)
