@@ -29,6 +29,7 @@ from .develop import _Developed, _every_pixel
 from .pixel_filter import filter_table
 from .replay import active as replay_active
 from .replay import padded_size
+from .scene_query import set_sample_count
 
 #: Samples per pixel of an albedo-only pass (the id pass), where the albedo
 #: varies.  A pixel traced with the nested integrator takes its albedo from
@@ -52,20 +53,24 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
 
     ``develop`` is :func:`~.develop._develop_jit` or its scalar twin;
     ``sampler`` is at the trace's spp, of which at most
-    :data:`ALBEDO_SAMPLES` are taken.  ``surface`` is what the pixels'
-    centres see, (shape index, mirror path) per pixel, or None; with it, and
-    when ``pixel_xy`` is every pixel of the image, the pass takes two steps
+    :data:`ALBEDO_SAMPLES` are taken (rounded up as the sampler takes
+    them).  ``surface`` is what the pixels' centres see, (shape index,
+    mirror path) per pixel, or None; with it, and when ``pixel_xy`` is
+    every pixel of the image, the pass takes two steps
     (see the module), else one; with it the samples' normal is not developed
     (zero: the trace takes the centres').  ``centre`` (n, 3), where every
     surface's albedo is one colour (:func:`~.scene_query.shape_albedos`), is
     the albedo of the surface each centre sees: the first step's, untraced.
     """
-    count = min(sampler.sample_count(), ALBEDO_SAMPLES)
+    # the count as the sampler takes it, as the trace's own spp: orthogonal
+    # rounds 16 up to 25 and refuses a launch of 16 samples a pixel, stratified
+    # rounds 8 up to 9 and leaves a stratum unsampled in a launch of 8
+    count = set_sample_count(sampler.clone(), min(sampler.sample_count(), ALBEDO_SAMPLES))
     width, height = (int(v) for v in sensor.film().crop_size())
     # with the centres' surface the trace takes their normal: the samples' is not developed
     normals = surface is None
     if surface is None or count == 1 or not _every_pixel(pixel_xy, width, height):
-        sampler.set_sample_count(count)
+        set_sample_count(sampler, count)
         return develop(scene, sensor, None, sampler, pixel_xy, count, seed, True, replay, box,
                        normals=normals)
     if centre is not None:  # what one sample would give, where it sees the centre's surface
@@ -73,16 +78,16 @@ def albedo_pass(develop, scene, sensor, sampler, pixel_xy: np.ndarray, seed: int
         first = _Developed(np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3)),
                            np.array(centre, dtype=np.float64), np.zeros((n, 3)))
     else:
-        sampler.set_sample_count(1)
+        one = set_sample_count(sampler, 1)  # (at least 4 for orthogonal and ldsampler)
         # each sample in its own pixel: where the albedo is one, the filter changes nothing
-        first = develop(scene, sensor, None, sampler, pixel_xy, 1, seed, True, replay, True,
+        first = develop(scene, sensor, None, sampler, pixel_xy, one, seed, True, replay, True,
                         normals=False)
     reach = _reach(None if box else sensor.film().rfilter())
     # (the centres' albedo follows their surface: it tells no change of its own)
     again = varied_pixels(pixel_xy, width, height, None if centre is not None else first.albedo,
                           surface, reach)
     if again.any():
-        sampler.set_sample_count(count)
+        set_sample_count(sampler, count)
         second = _second_step(develop, scene, sensor, sampler, pixel_xy[again], reach, count,
                               (seed + SECOND_SEED) & 0xFFFFFFFF, replay, box)
         first.albedo[again] = second.albedo  # (no normals: the trace takes the centres')

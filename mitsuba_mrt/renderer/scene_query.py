@@ -103,14 +103,26 @@ def set_sample_count(sampler: mi.Sampler, spp: int) -> int:
 
 
 def sample_count_at_most(sampler: mi.Sampler, spp: int) -> int:
-    """The largest sample count of at most ``spp`` (and at least 1) that
-    ``sampler`` takes as it is (``stratified`` and ``multijitter`` round
-    others up to a square): a launch planned to fit a time traces no more."""
+    """The largest sample count of at most ``spp`` that ``sampler`` takes as
+    it is (``stratified`` rounds others up to a square, ``ldsampler`` to a
+    power of four, ``orthogonal`` to a prime's square): a launch planned to
+    fit a time traces no more; the least count it takes where none is at
+    most ``spp`` (``orthogonal`` and ``ldsampler`` take at least 4).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_rgb")
+    >>> sample_count_at_most(mi.load_dict({"type": "orthogonal"}), 30)
+    25
+    >>> sample_count_at_most(mi.load_dict({"type": "orthogonal"}), 3)
+    4
+    """
     trial = sampler.clone()
     count = max(int(spp), 1)
     while count > 1 and set_sample_count(trial, count) > spp:
         count -= 1
-    return count
+    return count if count > 1 else set_sample_count(trial, 1)
 
 
 def shows(scene: mi.Scene, test: Callable, combine: Callable = any) -> list[bool]:

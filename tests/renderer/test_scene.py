@@ -58,7 +58,9 @@ def test_unused_parameters_are_all_named():
 
 
 @pytest.mark.parametrize("sampler, expected", [
-    ("independent", [1, 2, 3, 5, 8]), ("stratified", [1, 1, 1, 4, 4])])
+    ("independent", [1, 2, 3, 5, 8]), ("stratified", [1, 1, 1, 4, 4]),
+    # none of these takes fewer than 4: its least, not 1, which it would not take
+    ("orthogonal", [4, 4, 4, 4, 4]), ("ldsampler", [4, 4, 4, 4, 4])])
 def test_a_launch_planned_for_some_spp_traces_no_more(variant, sampler, expected):
     from mitsuba_mrt.renderer.scene_query import sample_count_at_most
 
@@ -210,3 +212,14 @@ def test_an_xyz_film_renders_the_rgb_film_s_image(variant):
     developed = np.array(mi.render(_film_scene("xyza", plugin)))  # the film's XYZ, alpha
     expected = np.array(mi.render(_film_scene("rgba", plugin)))
     assert np.allclose(xyz_to_rgb(developed.astype(np.float64)), expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("sampler", ["orthogonal", "ldsampler"])
+def test_the_id_pass_takes_the_sample_counts_a_sampler_takes(variant, sampler):
+    # the albedo pass launched 16 samples a pixel, which orthogonal rounds up
+    # to 25: "sample_count should be a multiple of samples_per_wavefront"
+    xml = small_scene_xml(24, integrator='<integrator type="path"/>').replace(
+        '<sampler type="stratified"><integer name="sample_count" value="1"/><boolean name="jitter" value="false"/></sampler>',
+        f'<sampler type="{sampler}"><integer name="sample_count" value="49"/></sampler>')
+    result = mitsuba_mrt.render(mi.load_string(xml), mode="idpass")
+    assert np.isfinite(result.image).all() and result.image.max() > 0
