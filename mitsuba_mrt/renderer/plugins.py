@@ -45,6 +45,12 @@ class MatteIntegrator(mi.SamplingIntegrator):
         if self.max_depth < 0:
             raise MRTError(f"matte: max_depth must be >= 0, got {self.max_depth}")
 
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        raise MRTError(NOT_DIFFERENTIABLE)
+
+    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
+        raise MRTError(NOT_DIFFERENTIABLE)
+
     def sample(self, scene, sampler, ray, medium=None, active=True):
         lights = [e for e in scene.emitters()
                   if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition)]
@@ -89,18 +95,33 @@ class MatteIntegrator(mi.SamplingIntegrator):
         return f"MatteIntegrator[max_depth={self.max_depth}]"
 
 
+#: Why ``dr.backward`` or ``dr.forward`` through an ``mrt`` render fails:
+#: its image is reconstructed outside Dr.Jit's AD graph (the default of
+#: Mitsuba's integrators, naive AD of ``render``, ends in Dr.Jit's "does not
+#: depend on the input variable(s)").
+NOT_DIFFERENTIABLE = ("mrt: its reconstruction is not differentiable; render with the nested "
+                      "integrator (e.g. prb) where gradients are wanted")
+
+
+def _number(value) -> int:
+    """``spp`` or ``seed`` as a Python int: ``mi.render`` passes a Dr.Jit
+    array (``mi.UInt32``) where the scene has parameters to differentiate."""
+    return int(value[0]) if isinstance(value, dr.ArrayBase) else int(value)
+
+
 class MRTIntegrator(mi.SamplingIntegrator):
     r"""The modified ray-tracer: trace a grid of pixels, reconstruct the rest.
 
-    Wraps a nested sampling integrator (``matte``, ``direct``, ``path``, ...)
-    that renders only the grid-sampled pixels; the other pixels are
+    Wraps a nested sampling integrator (``matte``, ``direct``, ``path``,
+    ``prb``, ...) that renders only the grid-sampled pixels; the other pixels are
     reconstructed per region of equal id (hit shape and visible lights) by
     the report's edge finder and linear-RBF interpolator.  ``mi.render``
     returns R, G, B followed by the AOVs ``id`` (the report's id: shape +
     0.5 per blocked light, under the paper rule), ``shape_index`` (0 =
     background, else 1 + position in the shapes sorted by ``id``), ``visible_lights``
     (bit k = point/spot light k unoccluded) and ``traced`` (1 at traced
-    pixels).  Untraced pixels carry their region's ids.
+    pixels).  Untraced pixels carry their region's ids.  The image has no
+    derivatives: ``dr.backward`` through it raises an error.
 
     .. pluginparameters::
 
@@ -199,12 +220,18 @@ class MRTIntegrator(mi.SamplingIntegrator):
 
         if not develop:
             raise MRTError("mrt: only develop=True is supported")
-        result = render(scene, self.nested, sensor=sensor, spp=int(spp) or None,
-                        seed=int(seed), params=self.params, mode=self.mode)
+        result = render(scene, self.nested, sensor=sensor, spp=_number(spp) or None,
+                        seed=_number(seed), params=self.params, mode=self.mode)
         self.last_result = result
         aovs = aov_images(result) if self.output_aovs else {}
         return _develop(resolve_sensor(scene, sensor).film(), result.image, result.alpha,
                         [aovs[name] for name in self.aov_names()], self.aov_names())
+
+    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
+        raise MRTError(NOT_DIFFERENTIABLE)
+
+    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
+        raise MRTError(NOT_DIFFERENTIABLE)
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         # Per-ray queries (e.g. from another integrator) get the nested result.

@@ -228,6 +228,21 @@ def test_differentiable_python_integrators_trace_their_primal_image(variant, nes
     assert np.allclose(np.array(mi.render(plugin, spp=64))[..., :3], direct, atol=1e-6)
 
 
+def test_mrt_plugin_renders_scenes_with_parameters_to_differentiate(variant):
+    # mi.render passes the seed as a Dr.Jit array there: int() of it raised a
+    # TypeError; the reconstruction has no derivatives, which dr.backward says
+    scene = mi.load_string(small_scene_xml(16, integrator="""<integrator type="mrt">
+        <integrator type="path"/><string name="mode" value="fast"/></integrator>"""))
+    params = mi.traverse(scene)
+    dr.enable_grad(params["ball.bsdf.reflectance.value"])
+    params.update()
+    image = mi.render(scene, params, spp=4, seed=3)
+    plain = mitsuba_mrt.render(scene, spp=4, seed=3, mode="fast").image
+    assert np.allclose(np.array(image)[..., :3], plain, atol=1e-6)
+    with pytest.raises(MRTError, match="mrt: its reconstruction is not differentiable"):
+        dr.backward(dr.mean(image))
+
+
 @pytest.mark.parametrize("kind", ["no_shapes", "no_lights"])
 def test_degenerate_scenes_render_without_nan(variant, kind):
     scene = mi.load_string(small_scene_xml(24, shapes=kind != "no_shapes",
