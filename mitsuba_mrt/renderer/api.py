@@ -35,7 +35,7 @@ from .pilot import effective_area
 from .pipeline import mrt_image
 from .replay import (Recorded, recorded_during, recorded_so_far, recording_seconds,
                      recordings)
-from .scene import pixel_format, resolve_sensor, unwrap, xyz_to_rgb
+from .scene import as_rgb, resolve_sensor, unwrap
 from .trace import pass_recorded, scene_warm, trace_pixels
 
 # Intel Open Image Denoise's module, where installed, loads with the renderer:
@@ -473,9 +473,6 @@ def _full_render(scene, integrator, sensor, spp, seed) -> tuple[np.ndarray, np.n
             dr.eval(image)
     finally:  # mi.render(spp=...) leaves the sensor's sampler at that count
         sensor.sampler().set_sample_count(count)
-    image = np.array(image, dtype=np.float64)
-    if pixel_format(sensor.film()).startswith("xyz"):
-        image = xyz_to_rgb(image)  # (the film developed the samples' RGB into XYZ)
-    check_radiance(image[..., :3], "pixels of the full render")
-    alpha = image[..., 3] if sensor.film().base_channels_count() == 4 else None
-    return image[..., :3], alpha, time.perf_counter() - start
+    rgb, alpha = as_rgb(np.array(image, dtype=np.float64), sensor.film())
+    check_radiance(rgb, "pixels of the full render")
+    return rgb, alpha, time.perf_counter() - start

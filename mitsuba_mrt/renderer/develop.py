@@ -117,6 +117,8 @@ def _rgb(value, wavelengths, active=True):
         value = mi.unpolarized_spectrum(value)
     if mi.is_spectral:
         return mi.spectrum_to_srgb(value, wavelengths, active)
+    if mi.is_monochromatic:  # (grey, as Mitsuba's own integrators develop it)
+        return mi.Color3f(value[0])
     return mi.Color3f(value)
 
 

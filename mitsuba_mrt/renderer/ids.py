@@ -44,11 +44,10 @@ def _hit_shape(si):
 def _follow_mirrors(scene, ray, si, valid):
     """Follow specular bounces from the first hit.
 
-    Returns the final (non-mirror) hit, its validity, the specular
-    throughput, and per bounce (bounced, shape pointer or object).
+    Returns the final (non-mirror) hit, its validity, and per bounce
+    (bounced, shape pointer or object).
     """
     ctx = mi.BSDFContext()
-    throughput = mi.Color3f(1.0)
     chain = []
     ray = mi.Ray3f(ray)
     for _ in range(MIRROR_DEPTH):
@@ -58,20 +57,18 @@ def _follow_mirrors(scene, ray, si, valid):
         mirror = _is_mirror(bsdf, valid)
         if not is_jit() and not mirror:
             break
-        bs, weight = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
+        bs, _ = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
         new_ray = si.spawn_ray(si.to_world(bs.wo))
         new_si = scene.ray_intersect(new_ray, mirror)
         if is_jit():
-            throughput = dr.select(mirror, throughput * weight, throughput)
             chain.append((mirror, dr.select(mirror, _hit_shape(new_si), mi.UInt32(0))))
             ray = dr.select(mirror, new_ray, ray)
             si = dr.select(mirror, new_si, si)
             valid = dr.select(mirror, new_si.is_valid(), valid)
         else:
-            throughput = throughput * weight
             chain.append((True, _hit_shape(new_si) if new_si.is_valid() else None))
             ray, si, valid = new_ray, new_si, bool(new_si.is_valid())
-    return ray, si, valid, throughput, chain
+    return ray, si, valid, chain
 
 
 def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
@@ -85,7 +82,7 @@ def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
     first_valid = valid = si.is_valid()
     chain = []
     if mirrors:
-        ray, si, valid, _, chain = _follow_mirrors(scene, ray, si, valid)
+        ray, si, valid, chain = _follow_mirrors(scene, ray, si, valid)
     mask = mi.UInt32(0)
     for k, light in enumerate(lights):
         if not (is_jit() or valid):
@@ -97,7 +94,7 @@ def _surface_aovs(scene, ray, lights, rule="rays", mirrors=False):
             blocked = dr.dot(si.n, ds.d) <= 0.0
         else:
             blocked = mi.Bool(False) if is_jit() else False
-        lit = valid & logical_not(blocked) & (dr.max(spec) > 0.0)
+        lit = valid & logical_not(blocked) & (dr.max(mi.unpolarized_spectrum(spec)) > 0.0)
         mask |= dr.select(lit, mi.UInt32(1 << k), mi.UInt32(0))
     return first, first_valid, mask, chain
 

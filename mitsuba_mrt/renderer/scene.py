@@ -181,14 +181,16 @@ def resolve_sensor(scene: mi.Scene, sensor) -> mi.Sensor:
 
 #: The ``hdrfilm`` pixel formats the MRT renders.  Its images are RGB, with
 #: alpha where the film has it; an XYZ film's full render is converted to
-#: RGB (:func:`xyz_to_rgb`), and the ``mrt`` plugin's RGB image is developed
-#: by the film into XYZ, as Mitsuba's own integrators' are.
+#: RGB (:func:`as_rgb`), and the ``mrt`` plugin's RGB image is developed by
+#: the film into XYZ, as Mitsuba's own integrators' are.  A luminance film
+#: (``y``, ``ya``) only in a monochromatic variant, whose RGB is grey.
 PIXEL_FORMATS = ("rgb", "rgba", "xyz", "xyza")
 
 
 def pixel_format(film: mi.Film) -> str:
-    """The pixel format of ``film``, one of :data:`PIXEL_FORMATS`; an MRTError
-    for another (a luminance film, whose one channel the MRT's colour
+    """The pixel format of ``film``, one of :data:`PIXEL_FORMATS` (or ``y``,
+    ``ya`` in a monochromatic variant); an MRTError for another (a luminance
+    film of a colour variant, whose one channel the MRT's colour
     reconstruction cannot give), or for a film that is not an ``hdrfilm``."""
     text = str(film)
     found = re.search(r"\bpixel_format = (\w+)", text)
@@ -196,20 +198,27 @@ def pixel_format(film: mi.Film) -> str:
         raise MRTError(f"the film is a {text.split('[', 1)[0]}: the MRT renders an hdrfilm's "
                        f"{', '.join(PIXEL_FORMATS)} pixel formats")
     name = found.group(1)
-    if name not in PIXEL_FORMATS:
+    if name not in PIXEL_FORMATS and not (mi.is_monochromatic and name in ("y", "ya")):
         shown = {"y": "luminance", "ya": "luminance_alpha"}.get(name, name)
         raise MRTError(f"the film's pixel_format is {shown}: the MRT renders colour "
                        f"({', '.join(PIXEL_FORMATS)})")
     return name
 
 
-def xyz_to_rgb(image: np.ndarray) -> np.ndarray:
-    """``image``'s first three channels from CIE XYZ to linear sRGB, in place,
-    with Mitsuba's own conversion (``mi.xyz_to_srgb``, linear: its matrix)."""
-    matrix = np.array([np.array(mi.xyz_to_srgb(mi.ScalarColor3f(*column)), dtype=np.float64)
-                       .ravel() for column in np.eye(3)]).T
-    image[..., :3] = image[..., :3] @ matrix.T
-    return image
+def as_rgb(image: np.ndarray, film: mi.Film) -> tuple[np.ndarray, np.ndarray | None]:
+    """(RGB, alpha or None) of an image ``film`` developed, (height, width,
+    channels), AOVs after its base channels: XYZ converted with Mitsuba's
+    own conversion (``mi.xyz_to_srgb``, linear: its matrix), luminance (of a
+    monochromatic variant) as grey."""
+    name = pixel_format(film)
+    colour = 1 if name.startswith("y") else 3
+    alpha = image[..., colour] if name.endswith("a") else None
+    rgb = np.repeat(image[..., :1], 3, axis=-1) if colour == 1 else image[..., :3]
+    if name.startswith("xyz"):
+        matrix = np.array([np.array(mi.xyz_to_srgb(mi.ScalarColor3f(*column)), dtype=np.float64)
+                           .ravel() for column in np.eye(3)]).T
+        rgb = rgb @ matrix.T
+    return rgb, alpha
 
 
 @dataclass
