@@ -80,7 +80,7 @@ def run_batch(scenes, out_dir, defines=(), *, scheduler: str | None = None,
     progress : a progress bar over the tasks on stderr
     echo : where the lines about the cluster and the outputs go
     **job_options : :class:`RenderJob` fields ``param_overrides``, ``spp``,
-        ``seed``, ``variant``, ``reference``, ``mode``
+        ``seed``, ``variant``, ``reference``, ``mode``, ``sensor``
 
     Tasks whose outputs are complete are skipped (status ``skipped``, the
     row read back from their JSON); a failed task is a row with status

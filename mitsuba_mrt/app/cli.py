@@ -88,6 +88,9 @@ def _add_render_options(parser: argparse.ArgumentParser, batch: bool = False) ->
     parser.add_argument("--spp", type=int, default=None,
                         help="samples per traced pixel (default: the scene's sampler)")
     parser.add_argument("--seed", type=int, default=0, help="sampler seed (default 0)")
+    parser.add_argument("--sensor", type=int, default=0,
+                        help="index of the scene's sensor to render (default 0); outputs of "
+                             "sensor N > 0 are named <scene>_sensorN")
     parser.add_argument("--variant", choices=VARIANT_CHOICES, default="auto",
                         help="Mitsuba variant; auto: LLVM if libLLVM >= 17, else scalar")
     parser.add_argument("--no-reference", action="store_true",
@@ -185,7 +188,8 @@ def _param_overrides(args) -> dict:
 def _job_options(args) -> dict:
     """The fields of a RenderJob beyond scene, folder and defines."""
     return dict(param_overrides=_param_overrides(args), spp=args.spp, seed=args.seed,
-                variant=args.variant, reference=not args.no_reference, mode=args.mode)
+                variant=args.variant, reference=not args.no_reference, mode=args.mode,
+                sensor=args.sensor)
 
 
 def _render(args) -> int:

@@ -35,18 +35,24 @@ class RenderJob:
     defines: dict = field(default_factory=dict)
     params: MRTParams | None = None
     param_overrides: dict[str, object] = field(default_factory=dict)
-
-    def params_for(self, scene_params: MRTParams | None) -> MRTParams:
-        """The render's parameters: ``params``, else the scene's, else the
-        defaults, with ``param_overrides`` on top (:meth:`MRTParams.with_`,
-        which validates them)."""
-        return (self.params or scene_params or MRTParams()).with_(**self.param_overrides)
     spp: int | None = None
     seed: int = 0
     variant: str = "auto"
     reference: bool = True
     mode: str | None = None
     progress: bool = False
+    sensor: int = 0  # the index of the scene's sensor to render
+
+    def params_for(self, scene_params: MRTParams | None) -> MRTParams:
+        """The render's parameters: ``params``, else the scene's, else the
+        defaults, with ``param_overrides`` on top (:meth:`MRTParams.with_`,
+        which validates them)."""
+        return (self.params or scene_params or MRTParams()).with_(**self.param_overrides)
+
+    def stem(self) -> str:
+        """The outputs' name: the scene file's, with ``_sensor<N>`` for a sensor but the first."""
+        stem = Path(self.scene).stem
+        return stem if self.sensor == 0 else f"{stem}_sensor{self.sensor}"
 
 
 @dataclass
@@ -83,6 +89,7 @@ class RunSummary:
     stats: dict
     environment: dict
     outputs: list = field(default_factory=list)
+    sensor: int = 0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -145,7 +152,7 @@ def run_render_job(job: RenderJob) -> RunSummary:
     """Render ``job.scene`` with the MRT (and the reference), write outputs.
 
     Files written into ``job.out_dir``, together or not at all, with
-    ``stem`` the scene file's name: ``stem_mrt.exr`` (R, G, B, id,
+    ``stem`` the scene file's name (:meth:`RenderJob.stem`): ``stem_mrt.exr`` (R, G, B, id,
     shape_index, visible_lights, traced), ``stem_mrt.png``, and with the
     reference ``stem_ref.exr``, ``stem_ref.png``, ``stem_error.png``; last
     ``stem.json``, the returned summary.
@@ -161,9 +168,9 @@ def run_render_job(job: RenderJob) -> RunSummary:
         tell("load", 0.0)
         scene = load_scene(job.scene, **job.defines)  # checks the film's size
         params = job.params_for(unwrap(scene).params)
-        result = render(scene, spp=job.spp, seed=job.seed, params=params, mode=job.mode,
-                        progress=tell)
-    stem = Path(job.scene).stem
+        result = render(scene, sensor=job.sensor, spp=job.spp, seed=job.seed, params=params,
+                        mode=job.mode, progress=tell)
+    stem = job.stem()
     height, width = result.ids.shape
     full = result.mode_used == "full"
     reference = None
@@ -171,7 +178,8 @@ def run_render_job(job: RenderJob) -> RunSummary:
         # at the scene's (or the job's) spp: a plan may trace fewer
         with progress_bar(job.progress) as tell:
             tell("reference", 0.0)
-            reference, seconds = render_reference(scene, spp=job.spp, seed=job.seed)
+            reference, seconds = render_reference(scene, sensor=job.sensor, spp=job.spp,
+                                                  seed=job.seed)
         # (the reference's alpha is the film's; only RGB is compared and written)
     summary = RunSummary(
         scene=os.fspath(job.scene), variant=variant, width=width, height=height,
@@ -183,6 +191,7 @@ def run_render_job(job: RenderJob) -> RunSummary:
                           seconds if reference is not None else None),
         relative_time=None, error=None, psnr_db=None,
         params=result.params.as_dict(), defines=dict(job.defines), seed=job.seed,
+        sensor=job.sensor,
         stats=dict(result.stats), environment=environment(variant))
     if full:
         summary.relative_time = result.timings.total / result.timings.full_render
@@ -192,7 +201,7 @@ def run_render_job(job: RenderJob) -> RunSummary:
         summary.psnr_db = psnr(result.image, reference)
 
     channels = {"R": result.image[..., 0], "G": result.image[..., 1], "B": result.image[..., 2]}
-    rgba = scene.sensors()[0].film().base_channels_count() == 4
+    rgba = scene.sensors()[job.sensor].film().base_channels_count() == 4
     if rgba and result.alpha is not None:
         channels["A"] = result.alpha
     for name, image in aov_images(result).items():
@@ -223,7 +232,8 @@ def summary_line(summary: RunSummary) -> str:
     parts = [f"{n} {label}" for n, label in ((traced.grid, "grid"),
                                              (traced.more, _more_label(s.mode_used)),
                                              (traced.full, "full render")) if n]
-    line = (f"{Path(s.scene).stem}: {s.width}x{s.height}, mode {s.mode_used} ({s.why}); "
+    name = Path(s.scene).stem + (f", sensor {s.sensor}" if s.sensor else "")
+    line = (f"{name}: {s.width}x{s.height}, mode {s.mode_used} ({s.why}); "
             f"traced {' + '.join(parts) or 'nothing'} = "
             f"{100.0 * traced.total / pixels:.1f}% of the pixels; "
             f"{t.total:.3f} s = trace {t.trace:.3f} + more {t.trace_more:.3f}"

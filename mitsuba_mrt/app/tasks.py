@@ -22,7 +22,7 @@ from ..errors import MRTError, one_line
 from ..modes import check_mode, render_modes
 from ..renderer.variants import VARIANT_CHOICES
 from ..runtime import configure
-from ..types import MRTParams, check_seed, check_spp
+from ..types import MRTParams, check_seed, check_spp, is_integer
 from .cluster import set_jit_threads
 from .job import RenderJob, run_render_job
 from .sweep import MAX_TASKS, Sweep
@@ -65,11 +65,13 @@ class BatchTask:
 
     @property
     def stem(self) -> str:
-        return Path(self.scene).stem
+        """Its outputs' name (:meth:`~mitsuba_mrt.app.job.RenderJob.stem`)."""
+        sensor = self.job.get("sensor", 0)
+        return Path(self.scene).stem + (f"_sensor{sensor}" if sensor else "")
 
 
 #: RenderJob's fields that a batch passes through unchanged.
-JOB_FIELDS = ("param_overrides", "spp", "seed", "variant", "reference", "mode")
+JOB_FIELDS = ("param_overrides", "spp", "seed", "variant", "reference", "mode", "sensor")
 
 
 def check_job_options(options: dict) -> dict:
@@ -83,6 +85,9 @@ def check_job_options(options: dict) -> dict:
     if options.get("spp") is not None:
         check_spp(options["spp"])
     check_seed(options.get("seed", 0))
+    sensor = options.get("sensor", 0)
+    if not is_integer(sensor) or sensor < 0:
+        raise MRTError(f"sensor must be an index >= 0, got {sensor!r}")
     variant = options.get("variant", "auto")
     if variant not in VARIANT_CHOICES:
         raise MRTError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANT_CHOICES)}")
@@ -202,7 +207,7 @@ def _matches(task: BatchTask, summary: dict) -> bool:
     job = task.job
     if summary.get("scene") != task.scene or summary.get("defines") != task.defines:
         return False
-    if summary.get("seed") != job.get("seed", 0):
+    if any(summary.get(key, 0) != job.get(key, 0) for key in ("seed", "sensor")):
         return False
     for key in ("spp", "mode"):
         if job.get(key) is not None and summary.get(key) != job[key]:

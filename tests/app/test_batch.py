@@ -220,7 +220,7 @@ def test_a_changed_request_is_not_skipped(local_batch):
     task = BatchTask("paper_fig1_res=16_spp=1", task.scene, {"res": "16", "spp": "1"},
                      {"res": "16", "spp": "1"}, task.job)
     assert completed_row(task, out)["status"] == "skipped"
-    for change in ({"seed": 1}, {"mode": "paper"}, {"reference": False},
+    for change in ({"seed": 1}, {"mode": "paper"}, {"reference": False}, {"sensor": 1},
                    {"param_overrides": {"sample_fraction": 0.2}}):
         changed = BatchTask(task.name, task.scene, task.defines, task.varying,
                             {**task.job, **change})

@@ -91,6 +91,12 @@ BAD = [
     (["render", SCENES / "paper_fig1.xml", "-D", "spp=-3"],
      "spp=-3 sets the scene's sample_count, which must be >= 1"),
     (["render", SCENES / "paper_fraction.xml", "--mode", "magic"], "unknown mode"),
+    (["render", SCENES / "gallery" / "two_sensors.xml", "--sensor", "2", "-D", "res=16"],
+     "sensor index 2 out of range: the scene has 2"),
+    (["render", SCENES / "paper_fraction.xml", "--sensor", "-1"],
+     "sensor index -1 out of range: the scene has 1"),
+    (["batch", SCENES / "paper_fraction.xml", "--sensor", "-1"],
+     "sensor must be an index >= 0, got -1"),
     # Mitsuba's list of unused parameters is on the lines after its first
     (["render", SCENES / "paper_fraction.xml", "-D", "foo=1", "-D", "bar=2"],
      "Found unused parameters: $foo=1, $bar=2"),
@@ -104,6 +110,21 @@ BAD = [
     # 0 was taken as no --res at all, and the bench ran at 256 px
     (["bench", "rival", "--quick", "--res", "0"], "--res must be >= 8, got 0"),
 ]
+
+
+def test_each_sensor_of_a_scene_renders_under_its_own_name(tmp_path):
+    # the command line rendered the first sensor only: a scene's second camera
+    # was out of reach without Python
+    shared = ["-D", "res=24", "-D", "spp=4", "--mode", "fast", "-o", tmp_path, "--json"]
+    runs = [run_cli("render", SCENES / "gallery" / "two_sensors.xml", *shared, *extra)
+            for extra in ([], ["--sensor", "1"])]
+    assert [proc.returncode for proc in runs] == [0, 0], runs[1].stderr
+    first, second = (json.loads(proc.stdout) for proc in runs)
+    assert (first["sensor"], second["sensor"]) == (0, 1)
+    assert "two_sensors_sensor1_mrt.exr" in second["outputs"]
+    assert (tmp_path / "two_sensors_mrt.exr").exists()  # (not overwritten)
+    assert second["error"] < 0.05  # against the second sensor's own full render
+    assert first["error"] != second["error"]
 
 
 @pytest.mark.parametrize("args,message", BAD)
