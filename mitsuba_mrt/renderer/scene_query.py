@@ -228,9 +228,12 @@ def _is_mirror_bsdf(bsdf) -> bool:
 def replayable(scene: mi.Scene) -> bool:
     """Whether a trace of ``scene`` can be replayed (:mod:`.replay`): not in a
     spectral or polarized variant (their colour tables are not among a
-    trace's inputs) and not without shapes (Dr.Jit finds no instance for the
-    intersection's virtual calls then)."""
-    return not (mi.is_spectral or mi.is_polarized) and len(scene.shapes()) > 0
+    trace's inputs), not without shapes (Dr.Jit finds no instance for the
+    intersection's virtual calls then) and not through a ``batch`` sensor
+    (its rays come from a host function, which Dr.Jit cannot record: it
+    aborts the process)."""
+    return (not (mi.is_spectral or mi.is_polarized) and len(scene.shapes()) > 0
+            and not any(s.class_name() == "BatchSensor" for s in scene.sensors()))
 
 
 def tracked_lights(scene: mi.Scene) -> list:

@@ -11,7 +11,9 @@ import mitsuba_mrt
 from helpers import small_scene_xml
 from mitsuba_mrt import MRTError, MRTWarning
 from mitsuba_mrt.renderer import scene as scene_module
+from mitsuba_mrt.recon.metrics import paper_error
 from mitsuba_mrt.renderer.api import render_reference
+from mitsuba_mrt.renderer.scene_query import replayable
 from mitsuba_mrt.renderer.scene import (BYTES_PER_PIXEL, as_rgb, check_film,
                                       warn_negative_emitters)
 
@@ -226,3 +228,23 @@ def test_the_id_pass_takes_the_sample_counts_a_sampler_takes(variant, sampler):
         f'<sampler type="{sampler}"><integer name="sample_count" value="49"/></sampler>')
     result = mitsuba_mrt.render(mi.load_string(xml), mode="idpass")
     assert np.isfinite(result.image).all() and result.image.max() > 0
+
+
+def test_a_batch_sensor_renders_without_replays(variant):
+    # its rays come from a host function: recording a replay of its trace
+    # aborted the whole process (SIGABRT in Dr.Jit's RecordThreadState)
+    cameras = "".join(f"""<sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="{o}" target="0, 0, 0" up="0, 1, 0"/>
+        </transform></sensor>""" for o in ("0, 0, 8", "8, 0, 0"))
+    xml = small_scene_xml(16, integrator='<integrator type="path"/>')
+    start = xml.index('<sensor type="perspective">')
+    xml = (xml[:start] + f'<sensor type="batch">{cameras}' +
+           xml[xml.index('<sampler', start):].replace('value="16"/><integer name="height"',
+                                                      'value="32"/><integer name="height"', 1))
+    scene = mi.load_string(xml)
+    assert not replayable(scene)
+    reference = render_reference(scene, spp=16)[0]
+    assert reference.shape == (16, 32, 3)
+    for mode in ("fast", "idpass"):
+        image = mitsuba_mrt.render(scene, spp=16, sample_fraction=1.0, mode=mode).image
+        assert paper_error(image, reference) < 0.02
