@@ -232,6 +232,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or _DEFAULTS).with_(**param_overrides)
     check_controls(mode, params)
+    if progress is not None and not callable(progress):
+        raise MRTError(f"progress must be callable as progress(stage, done), got {progress!r}")
     sensor = resolve_sensor(scene, sensor)
     tracer = GridTracer(scene, sensor, wrapper.nested, _spp_of(spp, sensor), check_seed(seed))
     if mode == "auto":

@@ -237,8 +237,11 @@ def unwrap(scene: mi.Scene, integrator: mi.Integrator | None = None) -> Wrapper:
     ``integrator`` (default: the scene's own) is an ``mrt`` wrapper when it
     carries ``nested`` and ``params`` (:class:`mitsuba_mrt.renderer.plugins.MRTIntegrator`
     does); any other integrator is traced as it is; no integrator, or
-    something else, is an MRTError.
+    something else, is an MRTError, as is a ``scene`` that is not a scene.
     """
+    if not isinstance(scene, mi.Scene):
+        raise MRTError(f"scene must be a Mitsuba scene (mitsuba_mrt.load_scene loads a file), "
+                       f"got {scene!r}")
     integrator = integrator if integrator is not None else scene.integrator()
     if integrator is None:
         raise MRTError("the scene has no integrator: add one to it, or pass integrator=")

@@ -140,6 +140,13 @@ def test_an_integrator_that_is_none_or_not_one_is_refused(variant):
             mitsuba_mrt.render(scene, sensor=bad)
     with pytest.raises(MRTError, match=r"^spp must be an integer >= 1, got 2\.5$"):
         mitsuba_mrt.render(scene, spp=2.5)
+    # a path or None raised AttributeError ('str' object has no attribute 'integrator')
+    for bad in ("scene.xml", None):
+        with pytest.raises(MRTError, match=r"^scene must be a Mitsuba scene \(mitsuba_mrt"
+                                           r"\.load_scene loads a file\), got"):
+            mitsuba_mrt.render(bad)
+    with pytest.raises(MRTError, match=r"^progress must be callable as progress\(stage, done\)"):
+        mitsuba_mrt.render(scene, progress=5)
 
 
 def test_a_seed_a_sampler_cannot_take_is_refused(variant):
