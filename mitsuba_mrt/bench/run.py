@@ -27,7 +27,8 @@ from pathlib import Path
 
 from ..errors import MRTError
 from ..imageio import atomic_path
-from .experiments import EXPERIMENTS, build_experiment, check_repeats, resolve_methods
+from .experiments import (EXPERIMENTS, Experiment, build_experiment, check_repeats,
+                          resolve_methods)
 from .analysis import CSV_COLUMNS, environment_line, markdown_tables, read_csv, write_csv
 from .measure import MIN_TIMED_SECONDS, PointRunner
 from .measure_denoise import DenoiseRunner
@@ -129,10 +130,55 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
         return out
     if repeats is None:
         repeats = 1 if quick else 3
-    repeats = check_repeats(repeats)
-    experiment = build_experiment(name, quick=quick, res=res)
+    setup = _prepare(name, out_dir, quick, check_repeats(repeats), variant, methods, res,
+                     scenes_dir, command)
+    collected = _Collected(setup, time.perf_counter())
+    with _progress(sum(collected.ticks), name, progress) as bar:
+        if map_points is None:
+            _measure_here(setup, collected, bar)
+        else:
+            _measure_elsewhere(setup, collected, bar, map_points)
+    return {name: collected.finish()}
+
+
+@dataclass
+class _Setup:
+    """An experiment ready to measure: what, how, and where it is written."""
+
+    name: str
+    experiment: Experiment
+    methods: list
+    repeats: int
+    variant: str
+    scenes: Path
+    out: Path
+    command: str
+    env: dict
+    cache: Path | None  # converged references kept between runs
+    min_seconds: float
+
+    @property
+    def denoise(self) -> bool:
+        return self.experiment.kind == "denoise"
+
+    @property
+    def runner_class(self):
+        return DenoiseRunner if self.denoise else PointRunner
+
+    def keep_images_for(self, k: int) -> int | None:
+        """The setting of point ``k`` whose images are kept (None: none)."""
+        if self.experiment.pictures:
+            return 0
+        point, setting = self.experiment.representative
+        return setting if k == point else None
+
+
+def _prepare(name, out_dir, quick, repeats, variant, methods, res, scenes_dir,
+             command) -> _Setup:
+    """Build and check experiment ``name``, activate ``variant``, make the folder."""
     from ..renderer.variants import activate, environment
 
+    experiment = build_experiment(name, quick=quick, res=res)
     variant = activate(variant)
     method_list = resolve_methods(methods if methods is not None else experiment.methods)
     scenes = _scenes_dir(scenes_dir)
@@ -150,70 +196,75 @@ def run_experiment(name: str, out_dir="out/bench", *, quick: bool = False,
             + ["--repeats", str(repeats), "--variant", variant]
             + (["--res", str(res)] if res is not None else [])
             + (["--methods", ",".join(method_list[1:])] if methods is not None else []))
+    return _Setup(name, experiment, method_list, repeats, variant, scenes, out, command,
+                  environment(variant), out / CACHE_DIR if experiment.cache_converged else None,
+                  0.0 if quick else MIN_TIMED_SECONDS)
 
-    env = environment(variant)
+
+class _Collected:
+    """The rows and pictures of the points measured so far, taken in the
+    points' order; the CSV rewritten after every point (a crash keeps its
+    rows), the report written by :meth:`finish`."""
+
+    def __init__(self, setup: _Setup, started: float):
+        self.setup, self.started = setup, started
+        self.rows, self.pictures, self.images = [], [], None
+        self.csv = setup.out / f"{setup.name}.csv"
+        self.ticks = [setup.runner_class.ticks(setup.experiment, p, setup.methods, setup.repeats)
+                      for p in setup.experiment.points]
+
+    def take(self, k: int, point_rows, point_images) -> None:
+        """Point ``k``'s rows and images (points in order)."""
+        setup, points = self.setup, self.setup.experiment.points
+        self.rows.extend(point_rows)
+        write_csv(self.csv, self.rows, DENOISE_COLUMNS if setup.denoise else CSV_COLUMNS)
+        if setup.denoise and k + 1 < len(points):  # its points take minutes each
+            _write_report(setup, self.rows, time.perf_counter() - self.started,
+                          f"after {k + 1} of {len(points)} scenes")
+        if setup.experiment.pictures:
+            picture = _picture(setup.out / f"{setup.name}_{Path(points[k].scene).stem}.png",
+                               point_rows, point_images, points[k], setup.experiment.pictures)
+            self.pictures.extend([picture] if picture else [])
+        elif point_images is not None:  # (the representative point's)
+            setting = setup.experiment.representative[1]
+            self.images = (point_images, points[k], points[k].settings[setting])
+
+    def finish(self) -> ExperimentResult:
+        """The plot, the markdown and the triptych of everything taken."""
+        setup, seconds = self.setup, time.perf_counter() - self.started
+        text_rows, png, md = _write_report(setup, self.rows, seconds)
+        triptych = None
+        if self.images is not None:
+            triptych = _triptych(setup.out / f"{setup.name}_triptych.png", self.rows,
+                                 *self.images)
+        return ExperimentResult(text_rows, self.csv, png, triptych, md, seconds, self.pictures)
+
+
+def _measure_here(setup: _Setup, collected: _Collected, bar) -> None:
+    """Every point in this process, one after the other."""
     meter = MemoryMeter()
-    started = time.perf_counter()
-    denoise = experiment.kind == "denoise"
-    runner_class = DenoiseRunner if denoise else PointRunner
-    columns = DENOISE_COLUMNS if denoise else CSV_COLUMNS
-    per_point = [runner_class.ticks(experiment, p, method_list, repeats)
-                 for p in experiment.points]
-    rows, images, pictures = [], None, []
-    csv_path = out / f"{name}.csv"
-    rep_point, rep_setting = experiment.representative
-    cache = out / CACHE_DIR if experiment.cache_converged else None
-    min_seconds = 0.0 if quick else MIN_TIMED_SECONDS
+    for k, point in enumerate(setup.experiment.points):
+        bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px", refresh=False)
+        runner = setup.runner_class(setup.experiment, point, setup.methods, setup.repeats,
+                                    setup.scenes, meter, setup.env, lambda: bar.update(1),
+                                    setup.min_seconds, cache_dir=setup.cache)
+        collected.take(k, *runner.run(setup.keep_images_for(k)))
 
-    def keep(k):
-        return 0 if experiment.pictures else (rep_setting if k == rep_point else None)
 
-    def take(k, point_rows, point_images):
-        """Point ``k``'s rows and images into the CSV and pictures (points in order)."""
-        nonlocal images
-        point = experiment.points[k]
-        rows.extend(point_rows)
-        write_csv(csv_path, rows, columns)  # after every point: a crash keeps its rows
-        if denoise and k + 1 < len(experiment.points):  # its points take minutes each
-            _write_report(out, name, experiment, rows, command, env, repeats,
-                          time.perf_counter() - started,
-                          f"after {k + 1} of {len(experiment.points)} scenes")
-        if experiment.pictures:
-            picture = _picture(out / f"{name}_{Path(point.scene).stem}.png", point_rows,
-                               point_images, point, experiment.pictures)
-            pictures.extend([picture] if picture else [])
-        elif point_images is not None:
-            images = (point_images, point, point.settings[rep_setting])
-
-    with _progress(sum(per_point), name, progress) as bar:
-        if map_points is None:
-            for k, point in enumerate(experiment.points):
-                bar.set_postfix_str(f"{point.scene} {point.defines.get('res')}px",
-                                    refresh=False)
-                runner = runner_class(experiment, point, method_list, repeats, scenes, meter,
-                                      env, lambda: bar.update(1), min_seconds,
-                                      cache_dir=cache)
-                take(k, *runner.run(keep(k)))
-        else:
-            # the workers read the scenes and keep the cache at these paths
-            calls = [(experiment, k, method_list, repeats, scenes.resolve(), variant,
-                      min_seconds, cache and cache.resolve(), keep(k))
-                     for k in range(len(experiment.points))]
-            done, next_k = {}, 0
-            for k, result in map_points(measure_point, calls):
-                bar.update(per_point[k])
-                done[k] = result
-                while next_k in done:
-                    take(next_k, *done.pop(next_k))
-                    next_k += 1
-    seconds = time.perf_counter() - started
-
-    text_rows, png, md = _write_report(out, name, experiment, rows, command, env, repeats,
-                                       seconds)
-    triptych = None
-    if images is not None:
-        triptych = _triptych(out / f"{name}_triptych.png", rows, *images)
-    return {name: ExperimentResult(text_rows, csv_path, png, triptych, md, seconds, pictures)}
+def _measure_elsewhere(setup: _Setup, collected: _Collected, bar, map_points) -> None:
+    """Every point by one :func:`measure_point` call of ``map_points``, taken in order."""
+    # the workers read the scenes and keep the cache at these paths
+    calls = [(setup.experiment, k, setup.methods, setup.repeats, setup.scenes.resolve(),
+              setup.variant, setup.min_seconds, setup.cache and setup.cache.resolve(),
+              setup.keep_images_for(k))
+             for k in range(len(setup.experiment.points))]
+    done, next_k = {}, 0
+    for k, result in map_points(measure_point, calls):
+        bar.update(collected.ticks[k])
+        done[k] = result
+        while next_k in done:
+            collected.take(next_k, *done.pop(next_k))
+            next_k += 1
 
 
 def measure_point(experiment, k: int, methods: list, repeats: int, scenes_dir: Path,
@@ -239,12 +290,12 @@ def _no_tick():
     """A worker has no progress bar: the client counts finished points."""
 
 
-def _write_report(out: Path, name: str, experiment, rows, command: str, env: dict,
-                  repeats: int, seconds: float, partial: str = ""):
+def _write_report(setup: _Setup, rows, seconds: float, partial: str = ""):
     """The plot and the markdown of ``rows`` (the CSV's, as written): (text rows, png, md).
 
     ``partial``: how far a run still going has come (said in the markdown).
     """
+    out, name, experiment = setup.out, setup.name, setup.experiment
     text_rows = read_csv(out / f"{name}.csv")
     png = None
     if experiment.kind != "gallery":
@@ -253,11 +304,11 @@ def _write_report(out: Path, name: str, experiment, rows, command: str, env: dic
                                                                          plot_sweep)
         plot(text_rows, png, experiment)
     # for denoise, the markdown also says what its CSV leaves out: samplers, stage, failures
-    md_rows = [asdict(r) for r in rows] if experiment.kind == "denoise" else text_rows
+    md_rows = [asdict(r) for r in rows] if setup.denoise else text_rows
     md = out / f"{name}.md"
-    text = (f"Command: `{command}`\n\n"
-            f"Environment: {environment_line(env)}; repeats {repeats}, more where the full "
-            f"render is fast (lower median); "
+    text = (f"Command: `{setup.command}`\n\n"
+            f"Environment: {environment_line(setup.env)}; repeats {setup.repeats}, more where "
+            f"the full render is fast (lower median); "
             + (f"written {partial}, {seconds:.0f} s in.\n\n" if partial else
                f"wall time of the whole experiment {seconds:.0f} s.\n\n")
             + markdown_tables(md_rows, experiment))
