@@ -22,9 +22,8 @@ choices alone.  Printed: each one's median time and error as ratios to
 import argparse
 import os
 import statistics
-from pathlib import Path
 
-from gallery_scenes import add_truths, load
+from gallery_scenes import add_truths, with_truths
 
 
 def main():
@@ -38,18 +37,13 @@ def main():
     args = parser.parse_args()
 
     import mitsuba_mrt
-    from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer import progressive
     from mitsuba_mrt.renderer.state import clear_caches
 
-    runtime.configure()
-    mitsuba_mrt.activate("auto")
     methods = {"plain": (False, "fast"), "+shading": (True, "fast"), "+high": (True, "auto")}
-    for name in args.scenes:
-        scene = load(name, args.res)
-        truth = kept_truth(scene, name, Path(args.truths))["box"]
+    for name, scene, truths in with_truths(args.scenes, args.res, args.truths):
+        truth = truths["box"]
 
         def run(shading, quality):
             progressive.SHADING = shading

@@ -46,3 +46,20 @@ def load(name: str, res: int):
                                       integrator="path", spp=64, jitter="true")
     return mitsuba_mrt.load_scene(ROOT / "scenes_xml" / "gallery" / f"{name}.xml",
                                   **gallery_defines(name, res))
+
+
+def with_truths(names, res: int, truths):
+    """``(name, scene, converged renders)`` of each gallery scene in ``names``
+    at ``res`` a side, the process first set up as the command line sets up
+    its own (LLVM where usable); the converged renders are
+    :func:`mitsuba_mrt.bench.rival.kept_truth`'s (``film`` and ``box``),
+    read from, or kept in, the folder ``truths``."""
+    import mitsuba_mrt
+    from mitsuba_mrt import runtime
+    from mitsuba_mrt.bench.rival import kept_truth
+
+    runtime.configure()
+    mitsuba_mrt.activate("auto")
+    for name in names:
+        scene = load(name, res)
+        yield name, scene, kept_truth(scene, name, Path(truths))

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gallery_scenes import add_truths, load
+from gallery_scenes import add_truths, with_truths
 
 ROOT = Path(__file__).resolve().parents[1]
 LADDER = (2, 4, 8, 16, 32)
@@ -58,17 +58,11 @@ def main():
 
     import time
 
-    import mitsuba_mrt
-    from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import kept_truth, noise_free_mse
+    from mitsuba_mrt.bench.rival import noise_free_mse
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.api import render, render_denoised, render_reference
 
-    runtime.configure()
-    mitsuba_mrt.activate("auto")
-    for name in args.scenes:
-        scene = load(name, args.res)
-        truth = kept_truth(scene, name, Path(args.truths))
+    for name, scene, truth in with_truths(args.scenes, args.res, args.truths):
         methods = {"full": lambda seed: (render_reference(scene, seed=seed)[0], "film")}
         for quality in ("fast", "high"):
             for spp in LADDER:

@@ -14,11 +14,10 @@ the lowest and highest over the mean.
 """
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
-from gallery_scenes import add_truths, load
+from gallery_scenes import add_truths, with_truths
 
 
 def main():
@@ -30,17 +29,11 @@ def main():
     add_truths(parser)
     args = parser.parse_args()
 
-    import mitsuba_mrt
-    from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.renderer.api import render_denoised
 
-    runtime.configure()
-    mitsuba_mrt.activate("auto")
-    for name in args.scenes:
-        scene = load(name, args.res)
-        truth = kept_truth(scene, name, Path(args.truths))["box"]
+    for name, scene, truths in with_truths(args.scenes, args.res, args.truths):
+        truth = truths["box"]
         errors = np.array([paper_error(render_denoised(scene, spp=args.spp, quality="high",
                                                        seed=seed)[0], truth)
                            for seed in range(args.seeds)])

@@ -14,11 +14,10 @@ texture at up to :data:`~mitsuba_mrt.recon.denoise.CLEAN_TEXTURE_SPP` spp.
 """
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
-from gallery_scenes import add_truths, load
+from gallery_scenes import add_truths, with_truths
 
 
 def main():
@@ -29,9 +28,6 @@ def main():
     add_truths(parser)
     args = parser.parse_args()
 
-    import mitsuba_mrt
-    from mitsuba_mrt import runtime
-    from mitsuba_mrt.bench.rival import kept_truth
     from mitsuba_mrt.recon.denoise import denoise_image, denoise_shading, textured_pixels
     from mitsuba_mrt.recon.metrics import paper_error
     from mitsuba_mrt.recon.sampling import every_pixel
@@ -40,11 +36,8 @@ def main():
     from mitsuba_mrt.renderer.scene import unwrap
     from mitsuba_mrt.types import SeedStream
 
-    runtime.configure()
-    mitsuba_mrt.activate("auto")
-    for name in args.scenes:
-        scene = load(name, args.res)
-        truth = kept_truth(scene, name, Path(args.truths))["box"]
+    for name, scene, truths in with_truths(args.scenes, args.res, args.truths):
+        truth = truths["box"]
         sensor = scene.sensors()[0]
         width, height = (int(v) for v in sensor.film().crop_size())
         xy = every_pixel(width, height)
