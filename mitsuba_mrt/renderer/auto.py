@@ -5,9 +5,10 @@ target a plan that an earlier default render of the scene in this process
 kept, :mod:`.kept_plans`, is taken again before them, without the probes,
 the check or the estimates that chose it: :func:`_again`):
 
-1. A noise-free scene (:func:`noise_free`, a small probe, where the
-   integrator samples no area light or environment:
-   :func:`~.scene_query.surely_noisy`): the full render, which is exact.
+1. A noise-free scene, or a nearly noise-free one (:func:`probe_noise`, a
+   small probe, where the integrator samples no area light or environment:
+   :func:`~.scene_query.surely_noisy`): the full render, which is exact or
+   beyond what denoised passes and the MRT reach.
 2. The default target (no time limit, no ``noise_threshold``), OIDN
    installed, at least :data:`~.auto_plans.HOME_MIN_SPP` spp: an MRT image
    where the scene's kind says it wins (:mod:`.auto_plans`), kept where its
@@ -51,6 +52,7 @@ import numpy as np
 
 from ..modes.plan import Candidate, Plan, choose
 from ..recon.denoise import oidn_available
+from ..recon.metrics import relative_error
 from ..recon.sampling import SamplePattern
 from ..types import MRTParams, SeedStream
 from . import kept_plans
@@ -93,6 +95,18 @@ DEFAULT_SPP_SHARE = 0.5
 #: spreads over (one it misses is rendered in full: ``mi.render``'s image,
 #: not denoised).
 PROBE_SIDE = 16
+
+#: A full render whose estimated relative RMS error (:func:`probe_noise`) is
+#: below this is the default plan: nothing cheaper meets its quality.  With
+#: ``path`` at 64 spp, the report's scene of one plane under one point light
+#: (0.0002) took denoised passes at 1.35 times the full render's time and
+#: 37 times its error (OIDN's own); a sphere over a floor under a point
+#: light (variants of camera and shape: 0.002-0.006 over eight seeds; with a
+#: box filter 0.007-0.008, left to the passes) took ``idpass+oidn``, which
+#: missed its check, then passes: 1.1-1.6 times the time.  The estimate
+#: varies with the seed by up to a third; the report's other scenes have
+#: 0.006 (one sphere) to 0.14, the gallery 0.033-0.070.
+NEARLY_EXACT = 0.005
 
 #: The reason of a plan :func:`_again` takes (``{}``: the kept plan's).
 AGAIN_REASON = "{}; kept from this process's earlier render of the scene"
@@ -223,13 +237,20 @@ def _plain_within(job: _Job) -> tuple[AutoOutcome | None, Traced]:
 
 def _noise_free_plan(scene, tracer, width: int, height: int, notes: list,
                      probe_start: float) -> AutoOutcome | None:
-    """The full render where the scene is noise-free (:func:`noise_free`,
-    asked only where :func:`~.scene_query.surely_noisy` cannot tell), else None."""
-    if surely_noisy(scene, tracer.integrator) or not noise_free(tracer, width, height):
+    """The full render where the scene is noise-free, or nearly
+    (:func:`probe_noise` below :data:`NEARLY_EXACT`; asked only where
+    :func:`~.scene_query.surely_noisy` cannot tell), else None."""
+    if surely_noisy(scene, tracer.integrator):
         return None
-    return AutoOutcome(Plan(Candidate("full", "full", tracer.spp, error=0.0),
-                            "noise-free: the full render is exact", target_error=0.0,
-                            pilot_s=time.perf_counter() - probe_start, notes=notes))
+    noise = probe_noise(tracer, width, height)
+    if noise >= NEARLY_EXACT:
+        return None
+    reason = ("noise-free: the full render is exact" if noise == 0.0 else
+              f"nearly noise-free (a full render's estimated error {noise:.4f}): the full "
+              f"render, which neither denoised passes nor the MRT meet")
+    return AutoOutcome(Plan(Candidate("full", "full", tracer.spp, error=noise), reason,
+                            target_error=noise, pilot_s=time.perf_counter() - probe_start,
+                            notes=notes))
 
 
 def _passes(job: _Job, traced: Traced, surfaces: tuple | None, escape: bool,
@@ -375,10 +396,13 @@ def plan_key(tracer, params: MRTParams) -> tuple:
     return tracer.spp, replace(params, time_limit=None, noise_threshold=None), oidn_available()
 
 
-def noise_free(tracer, width: int, height: int) -> bool:
-    """Whether a lattice of :data:`PROBE_SIDE` x :data:`PROBE_SIDE` pixels
-    over the image (their cells' centres) comes out the same from two sets
-    of random numbers (a deterministic scene: its full render has no noise).
+def probe_noise(tracer, width: int, height: int) -> float:
+    """A full render's estimated relative RMS error (:func:`~mitsuba_mrt.recon.metrics.relative_error`,
+    its noise at the scene's spp through the film's filter), from a lattice of
+    :data:`PROBE_SIDE` x :data:`PROBE_SIDE` pixels over the image (their
+    cells' centres), each traced with two sets of random numbers: 0 where
+    they come out the same (a deterministic scene, whose full render has no
+    noise).
 
     One small launch, before the passes: their first round, with its guides
     and the denoiser's estimates, costs several full renders of such a scene.
@@ -391,9 +415,15 @@ def noise_free(tracer, width: int, height: int) -> bool:
                                                     stream=SeedStream.PILOT, aovs=False,
                                                     replay=True)
     first, second = probe.radiance[:len(xy)], probe.radiance[len(xy):]
+    if not np.isfinite(probe.radiance).all():
+        return math.inf
     # (equal up to the order in which a pixel's samples were summed)
-    return bool(np.isfinite(probe.radiance).all()) and np.allclose(first, second, rtol=1e-5,
-                                                                   atol=1e-6)
+    if np.allclose(first, second, rtol=1e-5, atol=1e-6):
+        return 0.0
+    # one sample's variance is half the squared difference times the samples of
+    # each; a full render's pixel averages spp samples spread over the filter's area
+    samples = min(tracer.spp, 2) / (tracer.spp * effective_area(tracer.sensor.film().rfilter()))
+    return relative_error((first - second) ** 2 / 2.0 * samples, (first + second) / 2.0)
 
 
 def _measured_plan(scene, pattern, tracer, params: MRTParams, progress: Progress, costs: dict,
