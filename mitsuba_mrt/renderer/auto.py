@@ -397,8 +397,9 @@ def plan_key(tracer, params: MRTParams) -> tuple:
 
 
 def probe_noise(tracer, width: int, height: int) -> float:
-    """A full render's estimated relative RMS error (:func:`~mitsuba_mrt.recon.metrics.relative_error`,
-    its noise at the scene's spp through the film's filter), from a lattice of
+    """A full render's estimated relative RMS error
+    (:func:`~mitsuba_mrt.recon.metrics.relative_error`, its noise at the
+    scene's spp through the film's filter), from a lattice of
     :data:`PROBE_SIDE` x :data:`PROBE_SIDE` pixels over the image (their
     cells' centres), each traced with two sets of random numbers: 0 where
     they come out the same (a deterministic scene, whose full render has no
