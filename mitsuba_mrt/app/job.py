@@ -50,9 +50,15 @@ class RenderJob:
         return (self.params or scene_params or MRTParams()).with_(**self.param_overrides)
 
     def stem(self) -> str:
-        """The outputs' name: the scene file's, with ``_sensor<N>`` for a sensor but the first."""
-        stem = Path(self.scene).stem
-        return stem if self.sensor == 0 else f"{stem}_sensor{self.sensor}"
+        """The outputs' name (:func:`output_stem`)."""
+        return output_stem(self.scene, self.sensor)
+
+
+def output_stem(scene, sensor: int = 0) -> str:
+    """The name of a render's outputs: the scene file's, with ``_sensor<N>``
+    for a sensor but the first."""
+    stem = Path(scene).stem
+    return stem if sensor == 0 else f"{stem}_sensor{sensor}"
 
 
 @dataclass

@@ -24,7 +24,7 @@ from ..renderer.variants import VARIANT_CHOICES
 from ..runtime import configure
 from ..types import MRTParams, check_seed, check_spp, is_integer
 from .cluster import set_jit_threads
-from .job import RenderJob, run_render_job
+from .job import RenderJob, output_stem, run_render_job
 from .sweep import MAX_TASKS, Sweep
 
 #: The table's columns before and after the varying parameters.
@@ -65,9 +65,8 @@ class BatchTask:
 
     @property
     def stem(self) -> str:
-        """Its outputs' name (:meth:`~mitsuba_mrt.app.job.RenderJob.stem`)."""
-        sensor = self.job.get("sensor", 0)
-        return Path(self.scene).stem + (f"_sensor{sensor}" if sensor else "")
+        """Its outputs' name (:func:`~mitsuba_mrt.app.job.output_stem`)."""
+        return output_stem(self.scene, self.job.get("sensor", 0))
 
 
 #: RenderJob's fields that a batch passes through unchanged.

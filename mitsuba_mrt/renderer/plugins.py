@@ -45,12 +45,6 @@ class MatteIntegrator(mi.SamplingIntegrator):
         if self.max_depth < 0:
             raise MRTError(f"matte: max_depth must be >= 0, got {self.max_depth}")
 
-    def render_forward(self, scene, params, sensor=0, seed=0, spp=0):
-        raise MRTError(NOT_DIFFERENTIABLE)
-
-    def render_backward(self, scene, params, grad_in, sensor=0, seed=0, spp=0):
-        raise MRTError(NOT_DIFFERENTIABLE)
-
     def sample(self, scene, sampler, ray, medium=None, active=True):
         lights = [e for e in scene.emitters()
                   if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition)]

@@ -242,6 +242,13 @@ def test_mrt_plugin_renders_scenes_with_parameters_to_differentiate(variant):
     assert np.allclose(np.array(image)[..., :3], plain, atol=1e-6)
     with pytest.raises(MRTError, match="mrt: its reconstruction is not differentiable"):
         dr.backward(dr.mean(image))
+    # matte, a plain sampling integrator, keeps Mitsuba's own derivatives
+    matte = mi.load_string(small_scene_xml(16))
+    params = mi.traverse(matte)
+    dr.enable_grad(params["ball.bsdf.reflectance.value"])
+    params.update()
+    dr.backward(dr.mean(mi.render(matte, params, spp=1)))
+    assert (np.array(dr.grad(params["ball.bsdf.reflectance.value"])) > 0).all()
 
 
 @pytest.mark.parametrize("kind", ["no_shapes", "no_lights"])
