@@ -15,8 +15,9 @@ Cholesky factor, and the rest of the system is a few small dense products.
 
 That factor is computed in float32, half the time of float64 on the same
 cores, and used as an approximate inverse inside iterative refinement whose
-residuals are float64 products with ``A``: the result has float64 accuracy
-(the refinement stops at a residual of ``TOLERANCE`` relative to the data).
+residuals are float64 products with ``A``: the refinement stops at a residual
+of ``TOLERANCE`` relative to the data, far below the float32 resolution of
+the image the interpolant fills.
 Each refinement step divides the residual by roughly ``1 / (cond * 6e-8)``;
 a system too ill-conditioned for that, or one whose float32 factor fails, is
 solved by float64 LU instead, so the answer never depends on the shortcut.
@@ -36,10 +37,10 @@ from ..runtime.threads import for_row_blocks
 #: Systems smaller than this are solved by float64 LU directly.
 MIN_SIZE = 128
 #: Refinement stops when the largest residual is this fraction of the data's
-#: largest magnitude (float64 LU reaches about 1e-14 on these systems).
-TOLERANCE = 1e-12
-#: A stalled refinement is accepted when its residual is below this.
-ACCEPTABLE = 1e-9
+#: largest magnitude: a sixtieth of float32's rounding (6e-8), which the
+#: image is stored in (float64 LU reaches about 1e-14 on these systems, two
+#: or three more refinement steps).
+TOLERANCE = 1e-9
 #: Most refinement steps before falling back to float64 LU.
 MAX_STEPS = 30
 #: Distance triangles with at least this many rows are computed on all cores.
@@ -274,7 +275,7 @@ def _refined_cholesky(distances, poly, values, negated=None):
 def _refine(approximate, product, poly, values, scale):
     """Iterative refinement of ``A w + P c = values, P' w = 0`` with the
     approximate solver ``approximate(res_f, res_g) -> (dw, dc)``; None when
-    it stalls above ``ACCEPTABLE`` or diverges."""
+    it stalls above ``TOLERANCE`` or diverges."""
     n, m = poly.shape
     k = values.shape[1]
     lead = int(np.argmax(np.abs(values).max(axis=0)))
@@ -295,11 +296,11 @@ def _refine(approximate, product, poly, values, scale):
                               np.abs(res_g[:, active]).max(axis=0, initial=0.0)) / scale
         if not np.isfinite(residual).all():
             return None
-        stalled = residual > 0.5 * previous[active]  # at the float64 floor, or diverging
-        if (stalled & (residual > ACCEPTABLE)).any():
+        going = residual > TOLERANCE
+        if (going & (residual > 0.5 * previous[active])).any():  # stalled or diverging
             return None
         previous[active] = residual
-        active = active[(residual > TOLERANCE) & ~stalled]
+        active = active[going]
         if len(active) == 0:
             # back to the original columns: solution of f_j = data_j + share_j f_lead
             return (weights + np.outer(weights[:, lead], share),
