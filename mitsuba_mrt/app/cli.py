@@ -281,6 +281,22 @@ def _rival(args, command: str) -> int:
     return 0
 
 
+def unsupported_by_mitsuba(exc: BaseException) -> bool:
+    """Whether ``exc`` is Mitsuba saying that a plugin of the scene lacks what
+    another asks of it ("Texture::eval_1_grad(): not implemented!" for a bump
+    map over a checkerboard): the scene is at fault, and ``mi.render`` fails
+    on it alike.
+
+    Examples
+    --------
+    >>> unsupported_by_mitsuba(RuntimeError("[Texture] Texture::eval_1_grad(): not implemented!"))
+    True
+    >>> unsupported_by_mitsuba(RuntimeError("out of memory"))
+    False
+    """
+    return isinstance(exc, RuntimeError) and "(): not implemented" in str(exc)
+
+
 def innermost(exc: BaseException) -> BaseException:
     """The exception at the bottom of ``exc``'s chain of causes (Dr.Jit wraps
     the real error of a custom operation, e.g. Mitsuba's render, in a
@@ -321,5 +337,9 @@ def main(argv=None) -> int:
         return 130
     except Exception as exc:  # noqa: BLE001 - never a traceback on the terminal
         cause = innermost(exc)
+        if unsupported_by_mitsuba(cause):  # bad input: a scene Mitsuba cannot render
+            print(f"error: Mitsuba cannot render this scene: {str(cause).strip().splitlines()[0]}",
+                  file=sys.stderr)
+            return 2
         print(f"error: {one_line(cause)}", file=sys.stderr)
         return 2 if isinstance(cause, MRTError) else 1

@@ -244,7 +244,8 @@ def unwrap(scene: mi.Scene, integrator: mi.Integrator | None = None) -> Wrapper:
                        f"got {scene!r}")
     integrator = integrator if integrator is not None else scene.integrator()
     if integrator is None:
-        raise MRTError("the scene has no integrator: add one to it, or pass integrator=")
+        raise MRTError("the scene has no integrator: add one to it (in Python, or pass "
+                       "integrator=)")
     if not isinstance(integrator, mi.Integrator):
         raise MRTError(f"integrator must be a Mitsuba integrator, got {integrator!r}")
     params = getattr(integrator, "params", None)

@@ -145,6 +145,32 @@ def test_malformed_xml(tmp_path):
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
+def test_a_scene_mitsuba_cannot_render_is_bad_input(tmp_path):
+    # Found trying a user's scene: a bump map over a texture without gradients
+    # makes Mitsuba raise "not implemented" in the trace; it exited 1 as if the
+    # package had failed.
+    bad = tmp_path / "bump.xml"
+    bad.write_text("""<scene version="3.0.0">
+      <integrator type="path"/>
+      <sensor type="perspective">
+        <film type="hdrfilm">
+          <integer name="width" value="24"/><integer name="height" value="24"/>
+        </film>
+        <sampler type="independent"><integer name="sample_count" value="2"/></sampler>
+      </sensor>
+      <shape type="sphere"><bsdf type="bumpmap">
+        <texture type="checkerboard" name="arbitrary"/><bsdf type="diffuse"/>
+      </bsdf></shape>
+      <emitter type="constant"/>
+    </scene>""")
+    proc = run_cli("render", bad, "-o", tmp_path / "out", "--mode", "fast")
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("error: Mitsuba cannot render this scene: ")
+    assert "not implemented" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
 def test_inf_radiance_leaves_no_output(tmp_path):
     text = (SCENES / "paper_fraction.xml").read_text()
     bad = tmp_path / "inf.xml"

@@ -128,7 +128,8 @@ def test_an_integrator_that_is_none_or_not_one_is_refused(variant):
     bare = mi.load_dict({"type": "scene", "shape": {"type": "sphere"},
                          "sensor": {"type": "perspective",
                                     "film": {"type": "hdrfilm", "width": 8, "height": 8}}})
-    with pytest.raises(MRTError, match="^the scene has no integrator: add one to it, or pass"):
+    with pytest.raises(MRTError, match=r"^the scene has no integrator: add one to it "
+                                       r"\(in Python, or pass integrator=\)$"):
         mitsuba_mrt.render(bare)
     assert mitsuba_mrt.render(bare, integrator=mi.load_dict({"type": "path"})).image.shape[:2] \
         == (8, 8)
