@@ -92,8 +92,8 @@ def _camera_ray(sensor, sampler, position, spp, centre: bool = False):
     return ray, weight
 
 
-def nested_sample(integrator, scene, sampler, ray, active):
-    """``(value, valid)`` of one sample of the nested ``integrator`` along ``ray``.
+def nested_sample(integrator, scene, sampler, ray, active, medium=None):
+    """``(value, valid, aovs)`` of one sample of the nested ``integrator`` along ``ray``.
 
     Mitsuba's C++ integrators (``path``, ``volpath``, ...) and the MRT's own
     take ``sample(scene, sampler, ray, medium, active)``; its differentiable
@@ -103,12 +103,11 @@ def nested_sample(integrator, scene, sampler, ray, active):
     ``dr.ADMode.Primal``, as their own ``render`` asks for it.
     """
     if isinstance(integrator, mi.CppADIntegrator):
-        value, valid, _, _ = integrator.sample(
+        value, valid, aovs, _ = integrator.sample(
             mode=dr.ADMode.Primal, scene=scene, sampler=sampler, ray=ray, depth=mi.UInt32(0),
             δL=None, δaovs=None, state_in=None, active=mi.Bool(active))
-        return value, valid
-    value, valid, _ = integrator.sample(scene, sampler, ray, None, active)
-    return value, valid
+        return value, valid, aovs
+    return integrator.sample(scene, sampler, ray, medium, active)
 
 
 def _rgb(value, wavelengths, active=True):
@@ -454,7 +453,7 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
     zero = mi.Float(0.0)
     rgb, alpha, invalid = mi.Color3f(0.0), zero, zero
     if integrator is not None:
-        value, valid = nested_sample(integrator, scene, sampler, ray, active)
+        value, valid, _ = nested_sample(integrator, scene, sampler, ray, active)
         rgb = _rgb(ray_weight * value, ray.wavelengths, active)
         finite = dr.all(dr.isfinite(rgb))
         invalid = dr.select(active & ~finite, 1.0, 0.0)
@@ -644,7 +643,7 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             ray, ray_weight = _camera_ray(sensor, sampler, mi.Point2f(px, py), spp)
             rgb, alpha, invalid = np.zeros(3), 0.0, 0.0
             if integrator is not None:
-                value, valid = nested_sample(integrator, scene, sampler, ray, True)
+                value, valid, _ = nested_sample(integrator, scene, sampler, ray, True)
                 rgb = np.asarray(_rgb(ray_weight * value, ray.wavelengths), dtype=np.float64)
                 alpha = 1.0 if valid else 0.0
                 if not np.isfinite(rgb).all():

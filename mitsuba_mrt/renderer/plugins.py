@@ -229,9 +229,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         # Per-ray queries (e.g. from another integrator) get the nested result.
-        if isinstance(self.nested, mi.CppADIntegrator):  # (prb & co.: another signature)
-            return (*nested_sample(self.nested, scene, sampler, ray, active), [])
-        return self.nested.sample(scene, sampler, ray, medium, active)
+        return nested_sample(self.nested, scene, sampler, ray, active, medium)
 
     def aov_names(self):
         return list(self.AOV_NAMES) if self.output_aovs else []

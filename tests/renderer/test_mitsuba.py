@@ -16,6 +16,13 @@ from helpers import small_scene_xml
 LIGHTS = [((2.0, 2.0, 5.0), 60.0), ((-3.0, 0.0, 4.0), 40.0)]
 
 
+def needs_ad(variant):
+    """Skip where ``variant`` differentiates nothing (``scalar_rgb``, the
+    fallback without libLLVM 17+): prb & co. exist only in AD variants."""
+    if "_ad_" not in variant:
+        pytest.skip(f"{variant} is not an AD variant")
+
+
 def numpy_matte(o, d):
     """The report's shading for the small scene, evaluated in numpy."""
     def hit(o, d):
@@ -215,6 +222,7 @@ def test_mrt_plugin_with_path_integrator(variant):
 def test_differentiable_python_integrators_trace_their_primal_image(variant, nested):
     # Their sample() takes an AD mode and derivative state, not (scene, sampler,
     # ray, medium, active): every mode raised a TypeError (exit status 1)
+    needs_ad(variant)
     xml = small_scene_xml(16, integrator=f'<integrator type="{nested}"/>')
     scene = mi.load_string(xml)
     reference = np.array(mi.render(scene, spp=64))[..., :3]
@@ -229,9 +237,33 @@ def test_differentiable_python_integrators_trace_their_primal_image(variant, nes
     assert np.allclose(np.array(mi.render(plugin, spp=64))[..., :3], direct, atol=1e-6)
 
 
+@pytest.mark.parametrize("nested", ["path", "prb"])
+def test_the_plugin_answers_a_per_ray_query_with_its_nested_integrators_sample(variant, nested):
+    # (another integrator asking the mrt plugin for one ray's radiance)
+    if nested == "prb":
+        needs_ad(variant)
+    scene = mi.load_string(small_scene_xml(16))
+    ray, _ = scene.sensors()[0].sample_ray(0.0, 0.5, mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))
+
+    def one(integrator, query):
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(7, 1)
+        value, valid, aovs = query(integrator, sampler)
+        return np.array(value, dtype=np.float64).ravel(), bool(np.all(valid)), aovs
+
+    plugin = mi.load_dict({"type": "mrt", "nested": {"type": nested}})
+    value, valid, aovs = one(plugin, lambda it, s: it.sample(scene, s, ray, None, True))
+    assert valid and aovs == [] and np.isfinite(value).all() and value.max() > 0
+    if nested == "path":  # (prb's sample takes an AD mode: not callable so)
+        alone = mi.load_dict({"type": nested})
+        assert np.array_equal(value, one(alone, lambda it, s: it.sample(scene, s, ray, None,
+                                                                          True))[0])
+
+
 def test_mrt_plugin_renders_scenes_with_parameters_to_differentiate(variant):
     # mi.render passes the seed as a Dr.Jit array there: int() of it raised a
     # TypeError; the reconstruction has no derivatives, which dr.backward says
+    needs_ad(variant)
     scene = mi.load_string(small_scene_xml(16, integrator="""<integrator type="mrt">
         <integrator type="path"/><string name="mode" value="fast"/></integrator>"""))
     params = mi.traverse(scene)

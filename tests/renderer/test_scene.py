@@ -192,7 +192,9 @@ def test_a_scene_s_description_key_is_the_same_after_a_full_render(variant):
         return description_key(scene, sensor, scene.integrator(), 32 * 32)
     before, described = key(), str(sensor)
     render_reference(scene)
-    assert str(sensor) != described and key() == before
+    assert key() == before
+    if "scalar" not in variant:  # (a scalar render leaves the wavefront size as it was)
+        assert str(sensor) != described
 
 
 def _film_scene(pixel_format: str, integrator: str = '<integrator type="path"/>'):
