@@ -35,7 +35,7 @@ from .pilot import effective_area
 from .pipeline import mrt_image
 from .replay import (Recorded, recorded_during, recorded_so_far, recording_seconds,
                      recordings)
-from .scene import as_rgb, resolve_sensor, unwrap
+from .scene import as_rgb, check_traceable, resolve_sensor, unwrap, warn_nested_aovs
 from .trace import pass_recorded, scene_warm, trace_pixels
 
 # Intel Open Image Denoise's module, where installed, loads with the renderer:
@@ -232,6 +232,8 @@ def _render(scene, integrator, sensor, spp, seed, params, mode, progress,
     mode = check_mode(mode or wrapper.mode or "auto", render_modes())
     params = (params or wrapper.params or _DEFAULTS).with_(**param_overrides)
     check_controls(mode, params)
+    check_traceable(wrapper.nested, mode)
+    warn_nested_aovs(wrapper.nested)
     if progress is not None and not callable(progress):
         raise MRTError(f"progress must be callable as progress(stage, done), got {progress!r}")
     sensor = resolve_sensor(scene, sensor)
@@ -251,7 +253,8 @@ def _auto(tracer: GridTracer, params: MRTParams, start: float, progress) -> MRTR
     made (counted from before its first trace)."""
     scene, sensor = tracer.scene, tracer.sensor
     width, height = (int(v) for v in sensor.film().crop_size())
-    plan = auto.plan_without_pilot(width, height, tracer.spp, is_jit(), params)
+    plan = auto.plan_without_pilot(width, height, tracer.spp, is_jit(), params,
+                                   tracer.integrator)
     pattern = recorded = None
     if plan is None:
         recorded = recorded_so_far()

@@ -64,6 +64,7 @@ from .auto_plans import (HOME_MIN_SPP, PLAIN, AutoOutcome, Traced, find_surfaces
 from .pilot import effective_area, run_pilot
 from .progressive import FIRST_ROUND, Progress, needed_spp, predict, run_passes
 from .replay import recordings, token
+from .scene import plugin_name
 from .scene_query import sampler_bakes_spp, surely_noisy
 
 #: Below this many samples (pixels x spp) ``auto`` renders in full without a
@@ -115,20 +116,26 @@ RECALLED_REASON = "{}; remembered from an earlier process's render of the scene"
 
 
 def plan_without_pilot(width: int, height: int, spp: int, jit: bool,
-                       params: MRTParams) -> Plan | None:
+                       params: MRTParams, integrator: mi.Integrator | None = None
+                       ) -> Plan | None:
     """The plan where nothing is worth measuring (a full render), else None.
 
-    The scalar variant traces pixel by pixel in Python while ``mi.render``
+    An ``integrator`` that is not a sampling integrator (``ptracer`` traces
+    from the lights) renders no chosen pixels, only a whole image.  The
+    scalar variant traces pixel by pixel in Python while ``mi.render``
     runs Mitsuba's multithreaded C++ loop, so only a full render can win
     there; below ``AUTO_MIN_SAMPLES`` samples the passes' launches would cost
     more than they could save, unless a time limit asks for what fits it or
     a noise threshold for an estimated error.
     """
-    if jit and (width * height * spp >= AUTO_MIN_SAMPLES or params.time_limit is not None
-                or params.noise_threshold is not None):
+    if integrator is not None and not isinstance(integrator, mi.SamplingIntegrator):
+        reason = f"a {plugin_name(integrator)} renders whole images only"
+    elif jit and (width * height * spp >= AUTO_MIN_SAMPLES or params.time_limit is not None
+                  or params.noise_threshold is not None):
         return None
-    reason = ("the scalar variant renders in full" if not jit
-              else "too few samples for a plan to pay")
+    else:
+        reason = ("the scalar variant renders in full" if not jit
+                  else "too few samples for a plan to pay")
     return Plan(Candidate("full", "full", spp), reason, time_limit=params.time_limit,
                 target_error=params.noise_threshold)
 

@@ -154,7 +154,7 @@ def warn_negative_emitters(scene: mi.Scene) -> list[str]:
             except (TypeError, ValueError):
                 continue
             if least < 0:
-                kind = str(emitter).split("[")[0].strip() or "emitter"
+                kind = plugin_name(emitter) or "emitter"
                 name = emitter.id() or (f"of shape {owners[id(emitter)]!r}"
                                         if owners.get(id(emitter)) else f"#{position}")
                 message = (f"emitter {name} ({kind}) has a negative {key.split('.')[0]} "
@@ -195,7 +195,7 @@ def pixel_format(film: mi.Film) -> str:
     text = str(film)
     found = re.search(r"\bpixel_format = (\w+)", text)
     if not text.startswith("HDRFilm") or found is None:
-        raise MRTError(f"the film is a {text.split('[', 1)[0]}: the MRT renders an hdrfilm's "
+        raise MRTError(f"the film is a {plugin_name(film)}: the MRT renders an hdrfilm's "
                        f"{', '.join(PIXEL_FORMATS)} pixel formats")
     name = found.group(1)
     if name not in PIXEL_FORMATS and not (mi.is_monochromatic and name in ("y", "ya")):
@@ -229,6 +229,53 @@ class Wrapper:
     nested: mi.Integrator
     params: MRTParams | None = None
     mode: str | None = None
+
+
+def plugin_name(plugin) -> str:
+    """The name of ``plugin``'s class (``HDRFilm``, ``MomentIntegrator``,
+    ``PRBIntegrator``, ...): Mitsuba's ``class_name()`` of a C++ plugin, the
+    Python class's name where that is only the base it derives from.
+
+    Examples
+    --------
+    >>> plugin_name(mi.load_dict({"type": "ptracer"}))
+    'ParticleTracerIntegrator'
+    """
+    kind = type(plugin)
+    name = plugin.class_name() if hasattr(plugin, "class_name") else kind.__name__
+    return kind.__name__ if name in {base.__name__ for base in kind.__mro__} else name
+
+
+def check_traceable(integrator: mi.Integrator, mode: str) -> None:
+    """MRTError where ``mode`` traces chosen pixels (every mode but ``auto``,
+    which renders such a scene in full) and ``integrator`` is not a sampling
+    integrator: ``ptracer`` traces from the lights into the whole image."""
+    if mode != "auto" and not isinstance(integrator, mi.SamplingIntegrator):
+        raise MRTError(f"mode {mode} traces chosen pixels, which a "
+                       f"{plugin_name(integrator)} cannot (mode auto renders it in full)")
+
+
+#: Of a nested integrator's AOVs, how many the warning of :func:`warn_nested_aovs` names.
+NAMED_AOVS = 4
+
+
+def warn_nested_aovs(integrator: mi.Integrator) -> str | None:
+    """Warn (:class:`MRTWarning`, one line) where ``integrator`` has AOVs of
+    its own (``aov``, ``moment``): the MRT's image is colour (with alpha)
+    and the MRT's id AOVs, reconstructed or, where ``auto`` renders in full,
+    taken from ``mi.render``'s, and the integrator's AOVs are not among
+    them.  Returns the message (None: no AOVs)."""
+    names = list(integrator.aov_names())
+    if not names:
+        return None
+    # the user's names first (``_arg_N.*`` are channels Mitsuba names after nested plugins)
+    names.sort(key=lambda name: name.startswith("_arg_"))
+    shown = ", ".join(names[:NAMED_AOVS]) + (", ..." if len(names) > NAMED_AOVS else "")
+    message = (f"the {plugin_name(integrator)}'s {len(names)} AOV channels ({shown}) are not "
+               f"in the MRT's output, only colour and the MRT's ids: mi.render with it gives "
+               f"them")
+    warnings.warn(message, MRTWarning, stacklevel=3)
+    return message
 
 
 def unwrap(scene: mi.Scene, integrator: mi.Integrator | None = None) -> Wrapper:

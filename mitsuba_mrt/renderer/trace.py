@@ -25,6 +25,7 @@ from .lanes import is_jit
 from .replay import active as replay_active
 from .replay import padded_size
 from .pixel_filter import filter_reach
+from .scene import plugin_name
 from .scene_query import (_shape_lookup, albedo_per_shape, curved_mirror_indices,
                           emitter_indices, replayable, set_sample_count, shadow_rule,
                           shape_albedos, tracked_lights)
@@ -101,7 +102,8 @@ def trace_pixels(scene: mi.Scene, sensor: mi.Sensor, integrator: mi.Integrator,
         where no stage reads it).
     """
     if not isinstance(integrator, mi.SamplingIntegrator):
-        raise MRTError(f"the nested integrator must be a sampling integrator, got {integrator}")
+        raise MRTError(f"the nested integrator must be a sampling integrator, got a "
+                       f"{plugin_name(integrator)}")
     if int(spp) < 1:  # a kernel would divide by it: the process dies of SIGFPE
         raise MRTError(f"spp must be >= 1, got {spp}")
     pixel_xy = np.asarray(pixel_xy, dtype=np.int64)

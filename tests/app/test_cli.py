@@ -171,6 +171,16 @@ def test_a_scene_mitsuba_cannot_render_is_bad_input(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_mode_with_a_particle_tracer_is_one_line_exit_2_and_no_output(tmp_path):
+    # (a particle tracer traces from the lights: no chosen pixels; auto renders it in full)
+    proc = run_cli("render", SCENES / "paper_fraction.xml", "-o", tmp_path / "out", "-D", "res=24",
+                   "-D", "integrator=ptracer", "--mode", "fast")
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip() == ("error: mode fast traces chosen pixels, which a "
+                                   "ParticleTracerIntegrator cannot (mode auto renders it in full)")
+    assert not (tmp_path / "out").exists()
+
+
 def test_inf_radiance_leaves_no_output(tmp_path):
     text = (SCENES / "paper_fraction.xml").read_text()
     bad = tmp_path / "inf.xml"

@@ -330,3 +330,17 @@ def test_an_open_shapes_inside_and_outside_are_two_regions(variant, scalar):
     assert set(trace.path_id[ball]) == {2}  # a closed shape is seen from its front only
     assert len(np.unique(trace.ids("exact")[cup])) >= 2
     assert len(np.unique(trace.ids("paper")[cup & (trace.visible_lights == 1)])) == 1
+
+
+def test_a_particle_tracer_is_rendered_in_full_by_auto_and_refused_by_a_mode(variant):
+    # ptracer traces from the lights into the whole image: no chosen pixels to trace
+    scene = mi.load_string(small_scene_xml(res=40, integrator='<integrator type="ptracer"/>'))
+    with pytest.raises(mitsuba_mrt.MRTError, match=r"^mode fast traces chosen pixels, which a "
+                       r"ParticleTracerIntegrator cannot \(mode auto renders it in full\)$"):
+        mitsuba_mrt.render(scene, mode="fast")
+    result = mitsuba_mrt.render(scene, seed=2, time_limit=1.0)  # (under a limit too)
+    assert result.mode_used == "full"
+    assert result.auto.reason == "a ParticleTracerIntegrator renders whole images only"
+    image = np.array(mi.render(scene, seed=2), dtype=np.float64)[..., :3]
+    assert np.array_equal(result.image, image)
+

@@ -14,8 +14,8 @@ from mitsuba_mrt.renderer import scene as scene_module
 from mitsuba_mrt.recon.metrics import paper_error
 from mitsuba_mrt.renderer.api import render_reference
 from mitsuba_mrt.renderer.scene_query import replayable
-from mitsuba_mrt.renderer.scene import (BYTES_PER_PIXEL, as_rgb, check_film,
-                                      warn_negative_emitters)
+from mitsuba_mrt.renderer.scene import (BYTES_PER_PIXEL, as_rgb, check_film, plugin_name,
+                                      warn_negative_emitters, warn_nested_aovs)
 
 
 def test_film_too_large_for_memory_is_refused_with_an_estimate(variant):
@@ -50,6 +50,26 @@ def test_negative_emitters_are_named(variant):
     assert any("of shape 'lamp' (AreaLight) has a negative radiance (-1)" in m for m in messages)
     assert any("emitter spot (SpotLight) has a negative intensity (-2)" in m for m in messages)
     assert any("(DirectionalEmitter) has a negative irradiance (-3)" in m for m in messages)
+
+
+def test_a_nested_integrators_own_aovs_are_named_in_a_warning(variant):
+    # the MRT's output is colour and its ids: the aov integrator's channels are not in it
+    nested = ('<integrator type="aov"><string name="aovs" value="dd.y:depth,nn:sh_normal"/>'
+              '<integrator type="path"/></integrator>')
+    scene = mi.load_string(small_scene_xml(res=16, integrator=nested))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = mitsuba_mrt.render(scene, mode="fast")
+    assert [str(w.message) for w in caught if w.category is MRTWarning] == [
+        "the AOVIntegrator's 8 AOV channels (dd.y.T, nn.X, nn.Y, nn.Z, ...) are not in the "
+        "MRT's output, only colour and the MRT's ids: mi.render with it gives them"]
+    assert result.image.shape == (16, 16, 3)
+    assert warn_nested_aovs(mi.load_dict({"type": "path"})) is None
+
+
+def test_plugins_are_named_by_their_class(variant):
+    assert plugin_name(mi.load_dict({"type": "hdrfilm"})) == "HDRFilm"  # (C++)
+    assert plugin_name(mi.load_dict({"type": "matte"})) == "MatteIntegrator"  # (Python)
 
 
 def test_unused_parameters_are_all_named():
