@@ -19,7 +19,7 @@ import numpy as np
 from .develop import MIRROR_DEPTH, _aligned, _camera_ray
 from .lanes import _to_numpy, is_jit, logical_not
 from .replay import Replay
-from .scene_query import _inner_lookup, has_mirrors
+from .scene_query import _inner_lookup, has_cutouts, has_mirrors
 
 def _is_mirror(bsdf, valid):
     flags = bsdf.flags()
@@ -28,6 +28,12 @@ def _is_mirror(bsdf, valid):
     if is_jit():
         return valid & delta & ~smooth
     return bool(valid and delta and not smooth)
+
+
+def _follows(scene) -> bool:
+    """Whether a centre ray may go on past its first hit: a mirror or a
+    cut-out in ``scene`` (:func:`_follow_mirrors`)."""
+    return has_mirrors(scene) or has_cutouts(scene)
 
 
 def _hit_shape(si):
@@ -42,7 +48,10 @@ def _hit_shape(si):
 
 
 def _follow_mirrors(scene, ray, si, valid):
-    """Follow specular bounces from the first hit.
+    """Follow specular bounces from the first hit, and straight on through
+    a cut-out's hole: a ``mask`` BSDF whose opacity there is at most a half,
+    where one sample at 0.5 takes its null lobe (a leaf's pixels are the
+    leaf's, its holes' those of what they show).
 
     Returns the final (non-mirror) hit, its validity, and per bounce
     (bounced, shape pointer or object).
@@ -54,10 +63,14 @@ def _follow_mirrors(scene, ray, si, valid):
         if not is_jit() and not valid:
             break
         bsdf = si.bsdf(ray)
-        mirror = _is_mirror(bsdf, valid)
+        bs, _ = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), valid)
+        hole = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
+        if is_jit():
+            mirror = _is_mirror(bsdf, valid) | (valid & hole)
+        else:
+            mirror = _is_mirror(bsdf, valid) or bool(valid and hole)
         if not is_jit() and not mirror:
             break
-        bs, _ = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), mirror)
         new_ray = si.spawn_ray(si.to_world(bs.wo))
         new_si = scene.ray_intersect(new_ray, mirror)
         if is_jit():
@@ -166,7 +179,7 @@ def _ids_jit(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay):
     and side), shading normal and whether the surface is seen from its back,
     of every pixel's centre ray."""
     n = len(pixel_xy)
-    layout = (rule, has_mirrors(scene), tuple(int(v) for v in sensor.film().crop_size()))
+    layout = (rule, _follows(scene), tuple(int(v) for v in sensor.film().crop_size()))
     mask, pointers, inner, chain, normal, back = _IDS(
         scene, sensor, lights, _aligned(pixel_xy[:, 0]), _aligned(pixel_xy[:, 1]),
         layout, objects=(scene, sensor), record=replay)
@@ -240,7 +253,7 @@ def _ids_scalar(scene, sensor, sampler, pixel_xy, lights, lookup, rule, replay=F
     shape_index = np.zeros(n, dtype=np.int64)
     visible = np.zeros(n, dtype=np.uint32)
     normal = np.zeros((n, 3))
-    mirrors = has_mirrors(scene)
+    mirrors = _follows(scene)
     steps = [np.zeros(n, dtype=np.int64) for _ in range(MIRROR_DEPTH if mirrors else 0)]
     inner = np.zeros(n, dtype=np.int64)
     back = np.zeros(n, dtype=bool)

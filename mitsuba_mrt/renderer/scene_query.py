@@ -30,6 +30,13 @@ def has_mirrors(scene: mi.Scene) -> bool:
     return any(shows(scene, lambda shape: _is_mirror_bsdf(shape.bsdf()), any))
 
 
+def has_cutouts(scene: mi.Scene) -> bool:
+    """True if a shape of ``scene`` has a BSDF with a null lobe (``mask``, a
+    cut-out whose holes show what is behind it; ``null``, which shows it
+    everywhere)."""
+    return _any_bsdf_with(scene, mi.BSDFFlags.Null)
+
+
 def has_delta_lobes(scene: mi.Scene) -> bool:
     """True if a shape of ``scene`` has a BSDF that may sample a delta lobe
     (a mirror, glass, a smooth coating): a sample's albedo follows those

@@ -39,6 +39,44 @@ def test_a_mirror_reflecting_two_spheres_yields_two_regions(variant):
     assert np.allclose(trace.albedo[lit & (trace.path_id == min(chains))][0], [0.9, 0.1, 0.1])
 
 
+# A cut-out (a mask BSDF: opaque squares, holes between) before two spheres,
+# a light between it and them.
+CUTOUT_SCENE = """
+  <shape type="rectangle" id="a_cutout">
+    <transform name="to_world"><scale value="3"/><translate z="2"/></transform>
+    <bsdf type="mask"><texture type="checkerboard" name="opacity">
+        <rgb name="color0" value="0"/><rgb name="color1" value="1"/>
+        <transform name="to_uv"><scale x="4" y="4"/></transform></texture>
+      <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.2, 0.9"/></bsdf></bsdf>
+  </shape>
+  <shape type="sphere" id="b_red"><point name="center" x="-1.2" y="0" z="0"/><float name="radius" value="1"/>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.9, 0.1, 0.1"/></bsdf></shape>
+  <shape type="sphere" id="c_green"><point name="center" x="1.2" y="0" z="0"/><float name="radius" value="1"/>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.9, 0.1"/></bsdf></shape>
+  <emitter type="point"><point name="position" x="0" y="0" z="1.2"/><rgb name="intensity" value="10"/></emitter>"""
+
+
+def test_a_cutouts_holes_take_the_ids_of_what_they_show(variant):
+    # a leaf's opaque texels are the leaf's region; its holes are those of
+    # what they show, as a mirror's pixels are those of what it reflects
+    # (path passes the holes as a bounce: direct light at the spheres takes depth 3)
+    direct = '<integrator type="path"><integer name="max_depth" value="3"/></integrator>'
+    scene = mi.load_string(small_scene_xml(64, direct, extra=CUTOUT_SCENE, shapes=False,
+                                           lights=False))
+    trace = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0).trace
+    assert (trace.shape_index == 1).all()  # the cut-out covers the image (the report's id)
+    exact = trace.ids("exact")
+    red = trace.radiance[:, 0] > 2 * trace.radiance[:, 1] + 0.01
+    green = trace.radiance[:, 1] > 2 * trace.radiance[:, 0] + 0.01
+    assert red.sum() > 20 and green.sum() > 20
+    # one region each, apart: the holes over the red sphere, those over the green one
+    assert len(set(exact[red].tolist())) == 1 and len(set(exact[green].tolist())) == 1
+    assert exact[red][0] != exact[green][0]
+    # and the opaque squares' (the most common id: the squares are half the cut-out)
+    squares = np.bincount(np.unique(exact, return_inverse=True)[1]).argmax()
+    assert np.unique(exact)[squares] not in (exact[red][0], exact[green][0])
+
+
 def test_refinement_resolves_reflected_edges(variant):
     from mitsuba_mrt.renderer.scene_query import ordered_shapes
 
