@@ -453,7 +453,9 @@ def _develop_kernel(scene, sensor, integrator, pixel_x, pixel_y, cdf, first, see
     zero = mi.Float(0.0)
     rgb, alpha, invalid = mi.Color3f(0.0), zero, zero
     if integrator is not None:
-        value, valid, _ = nested_sample(integrator, scene, sampler, ray, active)
+        # (from the medium the camera sits in, as mi.render starts its paths)
+        value, valid, _ = nested_sample(integrator, scene, sampler, ray, active,
+                                        sensor.get_medium())
         rgb = _rgb(ray_weight * value, ray.wavelengths, active)
         finite = dr.all(dr.isfinite(rgb))
         invalid = dr.select(active & ~finite, 1.0, 0.0)
@@ -643,7 +645,8 @@ def _develop_scalar(scene, sensor, integrator, sampler, pixel_xy, spp, seed, alb
             ray, ray_weight = _camera_ray(sensor, sampler, mi.Point2f(px, py), spp)
             rgb, alpha, invalid = np.zeros(3), 0.0, 0.0
             if integrator is not None:
-                value, valid, _ = nested_sample(integrator, scene, sampler, ray, True)
+                value, valid, _ = nested_sample(integrator, scene, sampler, ray, True,
+                                                sensor.get_medium())
                 rgb = np.asarray(_rgb(ray_weight * value, ray.wavelengths), dtype=np.float64)
                 alpha = 1.0 if valid else 0.0
                 if not np.isfinite(rgb).all():

@@ -344,3 +344,18 @@ def test_a_particle_tracer_is_rendered_in_full_by_auto_and_refused_by_a_mode(var
     image = np.array(mi.render(scene, seed=2), dtype=np.float64)[..., :3]
     assert np.array_equal(result.image, image)
 
+
+def test_a_camera_inside_a_medium_traces_its_paths_through_it(variant):
+    # fog around the camera: a traced pixel's paths start in it, as mi.render's
+    # do (an absorbing medium: a surface 7 away, lit from 5 away, keeps a third)
+    fog = ('<integrator type="volpath"/>'
+           '<medium type="homogeneous" id="fog"><rgb name="albedo" value="0"/>'
+           '<float name="sigma_t" value="0.1"/></medium>')
+    xml = small_scene_xml(16, fog).replace(
+        '<sensor type="perspective">', '<sensor type="perspective"><ref id="fog" name="exterior"/>')
+    scene = mi.load_string(xml)
+    full = np.array(mi.render(scene, spp=256), dtype=np.float64)[..., :3]
+    traced = mitsuba_mrt.render(scene, mode="fast", sample_fraction=1.0, spp=256).image
+    assert full.mean() > 0.005
+    assert 0.8 < traced.mean() / full.mean() < 1.25
+
