@@ -171,7 +171,7 @@ class SparseTrace:
     visible_lights : ndarray of uint32, shape (n,)
         Bit k set when tracked light k is unoccluded from the hit point.
     num_lights : int
-        Number of tracked lights (point and spot lights, at most 32).
+        Number of tracked lights (point, spot and directional lights, at most 32).
     spp : int
         Samples per pixel actually taken (the sampler may round the request:
         ``stratified`` takes the next square power of two).
@@ -179,7 +179,7 @@ class SparseTrace:
         Wall time of the trace, kernel compilation included.
     shadow_rays : bool
         False when light visibility was known without shadow rays (no
-        point or spot light, or a single sphere or planar shape).
+        tracked light, or a single sphere or planar shape).
     path_id : ndarray of int64, shape (n,), optional
         The chain of shapes met along specular (mirror) bounces, the shape
         hit inside an instance's group and the side of the surface seen
@@ -325,7 +325,7 @@ class Skips:
     Attributes
     ----------
     shadow_rays : int
-        Light visibility known without shadow rays (no point or spot light,
+        Light visibility known without shadow rays (no tracked light,
         or a single sphere or planar shape).
     edge_finding : int
         A single id: no edges to find.

@@ -1,7 +1,7 @@
 """Full-resolution id pass: mode ``idpass``, and textures.
 
 For expensive nested integrators (``path`` at many spp) one primary ray per
-pixel, plus one shadow ray per point or spot light, is cheap next to the
+pixel, plus one shadow ray per point, spot or directional light, is cheap next to the
 integrator itself, and it gives every pixel its exact id and its albedo.
 The expensive integrator then runs only at the grid pixels, and at the
 pixels whose id no grid sample nearby carries (thin slivers).  Irradiance

@@ -2,7 +2,7 @@
 
 The trace reports, per traced pixel, ``shape_index`` (0 = background, else
 1 + the shape's rank by ``id``) and ``visible_lights``, a bit
-mask over the scene's point and spot lights (bit ``k`` set when light ``k``
+mask over the scene's point, spot and directional lights (bit ``k`` set when light ``k``
 is unoccluded from the hit point).  Two rules turn them into integer ids:
 
 ``paper``

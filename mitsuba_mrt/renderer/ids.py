@@ -2,7 +2,7 @@
 
 The hit shape (for an instance of a shape group, the instance, and the
 shape inside the group), the chain of shapes along the ray's mirror
-bounces, which point and spot lights the hit point sees, and the side of
+bounces, which point, spot and directional lights the hit point sees, and the side of
 the surface seen; the shape, the chain, the inner shape and the side are
 folded into one path id per pixel.  In a JIT variant every centre ray is a
 lane of one Dr.Jit wavefront; the scalar variant loops in Python.

@@ -113,7 +113,7 @@ class MRTIntegrator(mi.SamplingIntegrator):
     returns R, G, B followed by the AOVs ``id`` (the report's id: shape +
     0.5 per blocked light, under the paper rule), ``shape_index`` (0 =
     background, else 1 + position in the shapes sorted by ``id``), ``visible_lights``
-    (bit k = point/spot light k unoccluded) and ``traced`` (1 at traced
+    (bit k = point, spot or directional light k unoccluded) and ``traced`` (1 at traced
     pixels).  Untraced pixels carry their region's ids.  The image has no
     derivatives: ``dr.backward`` through it raises an error.
 

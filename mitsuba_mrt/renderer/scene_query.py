@@ -244,16 +244,15 @@ def replayable(scene: mi.Scene) -> bool:
 
 
 def tracked_lights(scene: mi.Scene) -> list:
-    """The scene's point and spot lights (delta position), at most 32."""
-    lights = [e for e in scene.emitters()
-              if mi.has_flag(e.flags(), mi.EmitterFlags.DeltaPosition)]
-    return lights[:MAX_TRACKED_LIGHTS]
+    """The scene's point, spot and directional lights (:func:`_delta_light`:
+    their shadows have sharp edges, which the ids track), at most 32."""
+    return [e for e in scene.emitters() if _delta_light(e)][:MAX_TRACKED_LIGHTS]
 
 
 def shadow_rule(scene: mi.Scene, lights: list) -> str:
     """How light visibility is found: ``rays``, or without shadow rays.
 
-    ``none`` (no point or spot light), ``facing`` (a single sphere: a point
+    ``none`` (no tracked light: :func:`tracked_lights`), ``facing`` (a single sphere: a point
     sees a light exactly when it faces it, as a shadow ray would find) or
     ``always`` (a single planar shape never blocks a light from itself).
     """

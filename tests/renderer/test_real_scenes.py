@@ -359,3 +359,20 @@ def test_a_camera_inside_a_medium_traces_its_paths_through_it(variant):
     assert full.mean() > 0.005
     assert 0.8 < traced.mean() / full.mean() < 1.25
 
+
+def test_a_directional_lights_shadow_is_an_edge_between_ids(variant):
+    # the sun's shadow is as sharp as a point light's: its visibility is an id's
+    sun = ('<emitter type="directional"><vector name="direction" x="0.3" y="0.2" z="-1"/>'
+           '<rgb name="irradiance" value="3"/></emitter>')
+    direct = '<integrator type="path"><integer name="max_depth" value="2"/></integrator>'
+    scene = mi.load_string(small_scene_xml(48, direct, extra=sun, lights=False))
+    trace = mitsuba_mrt.render(scene, mode="paper", sample_fraction=1.0).trace
+    assert trace.num_lights == 1
+    wall = trace.shape_index == 2
+    lit = wall & (trace.visible_lights == 1)
+    shadowed = wall & (trace.visible_lights == 0)
+    assert lit.sum() > 100 and shadowed.sum() > 20
+    assert trace.radiance[shadowed].max() < 0.01 < trace.radiance[lit].min()
+    exact = trace.ids("exact")
+    assert len(set(exact[lit].tolist()) | set(exact[shadowed].tolist())) == 2
+
