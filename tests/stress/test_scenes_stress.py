@@ -1,6 +1,6 @@
 """Stress scenes for the Mitsuba side: tiny and huge scales, a grazing camera,
-a camera inside a sphere, thousands of tiny shapes, degenerate BSDF
-parameters.  Each mode must give a finite image, non-negative wherever the
+a camera inside a sphere or in fog, thousands of tiny shapes, a
+cut-out, a sun beside point lights, degenerate BSDF parameters.  Each mode must give a finite image, non-negative wherever the
 traced radiance is (Mitsuba itself returns negative radiance for some
 invalid BSDFs), or raise a clear MRTError.  Renders are 16 x 16; the
 thorough profile (MITSUBA_MRT_STRESS=thorough) adds the BSDFs under ``matte``.
@@ -72,6 +72,25 @@ def _triangle_soup(path, count: int = 3000) -> str:
     return f'<shape type="obj"><string name="filename" value="{path}"/></shape>'
 
 
+#: A cut-out (opaque and half-transparent squares, holes) before the sphere.
+_CUTOUT = """<shape type="rectangle"><transform name="to_world"><translate z="3"/></transform>
+  <bsdf type="mask"><texture type="checkerboard" name="opacity">
+    <rgb name="color0" value="0"/><rgb name="color1" value="0.6"/>
+    <transform name="to_uv"><scale x="5" y="5"/></transform></texture><bsdf type="diffuse"/></bsdf>
+</shape>"""
+#: Fog around the camera (a surface 8 away keeps a tenth of its light), and a sun.
+_FOG = ('<integrator type="volpath"><integer name="max_depth" value="4"/></integrator>'
+        '<medium type="homogeneous" id="fog"><rgb name="albedo" value="0.9"/>'
+        '<float name="sigma_t" value="0.3"/></medium>')
+_SUN = ('<emitter type="directional"><vector name="direction" x="0.3" y="0.2" z="-1"/>'
+        '<rgb name="irradiance" value="2"/></emitter>')
+
+
+def _in_fog(xml: str) -> str:
+    return xml.replace('<sensor type="perspective">',
+                       '<sensor type="perspective"><ref id="fog" name="exterior"/>', 1)
+
+
 SCENES = {
     "scale_1e-4": lambda tmp: scene_xml(1e-4),
     "scale_1e4": lambda tmp: scene_xml(1e4),
@@ -83,6 +102,9 @@ SCENES = {
               '<rgb name="intensity" value="1"/></emitter>'),
     "many_tiny_spheres": lambda tmp: scene_xml(extra=_many_spheres()),
     "triangle_soup": lambda tmp: scene_xml(extra=_triangle_soup(tmp / "soup.obj")),
+    "cutout_before_sphere": lambda tmp: scene_xml(integrator=PATH, spp=4, extra=_CUTOUT),
+    "camera_in_fog": lambda tmp: _in_fog(scene_xml(integrator=_FOG, spp=4)),
+    "sun_and_points": lambda tmp: scene_xml(integrator=PATH, spp=4, extra=_SUN),
 }
 
 #: BSDF parameters at or past the edge of their range; Mitsuba accepts these.
