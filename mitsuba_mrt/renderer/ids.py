@@ -66,18 +66,18 @@ def _follow_mirrors(scene, ray, si, valid):
         bs, _ = bsdf.sample(ctx, si, 0.5, mi.Point2f(0.5, 0.5), valid)
         hole = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)
         if is_jit():
-            mirror = _is_mirror(bsdf, valid) | (valid & hole)
+            onward = _is_mirror(bsdf, valid) | (valid & hole)
         else:
-            mirror = _is_mirror(bsdf, valid) or bool(valid and hole)
-        if not is_jit() and not mirror:
+            onward = _is_mirror(bsdf, valid) or bool(valid and hole)
+        if not is_jit() and not onward:
             break
         new_ray = si.spawn_ray(si.to_world(bs.wo))
-        new_si = scene.ray_intersect(new_ray, mirror)
+        new_si = scene.ray_intersect(new_ray, onward)
         if is_jit():
-            chain.append((mirror, dr.select(mirror, _hit_shape(new_si), mi.UInt32(0))))
-            ray = dr.select(mirror, new_ray, ray)
-            si = dr.select(mirror, new_si, si)
-            valid = dr.select(mirror, new_si.is_valid(), valid)
+            chain.append((onward, dr.select(onward, _hit_shape(new_si), mi.UInt32(0))))
+            ray = dr.select(onward, new_ray, ray)
+            si = dr.select(onward, new_si, si)
+            valid = dr.select(onward, new_si.is_valid(), valid)
         else:
             chain.append((True, _hit_shape(new_si) if new_si.is_valid() else None))
             ray, si, valid = new_ray, new_si, bool(new_si.is_valid())
