@@ -8,16 +8,24 @@ from helpers import small_scene_xml
 
 # A mirror facing the camera, two spheres behind the camera: they are seen
 # only in the mirror.
+
+
+def two_spheres(x: float, z: float, radius: float, light_z: float, intensity: float) -> str:
+    """A red sphere at (-x, 0, z), a green one at (x, 0, z), a point light at (0, 0, light_z)."""
+    return "".join(
+        f'<shape type="sphere" id="{name}"><point name="center" x="{sign * x}" y="0" z="{z}"/>'
+        f'<float name="radius" value="{radius}"/><bsdf type="diffuse">'
+        f'<rgb name="reflectance" value="{colour}"/></bsdf></shape>'
+        for name, sign, colour in (("b_red", -1, "0.9, 0.1, 0.1"), ("c_green", 1, "0.1, 0.9, 0.1"))
+    ) + (f'<emitter type="point"><point name="position" x="0" y="0" z="{light_z}"/>'
+         f'<rgb name="intensity" value="{intensity}"/></emitter>')
+
+
 MIRROR_SCENE = """
   <shape type="rectangle" id="a_mirror">
     <transform name="to_world"><scale value="4"/></transform>
     <bsdf type="conductor"><string name="material" value="none"/></bsdf>
-  </shape>
-  <shape type="sphere" id="b_red"><point name="center" x="-1.6" y="0" z="12"/><float name="radius" value="1.2"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.9, 0.1, 0.1"/></bsdf></shape>
-  <shape type="sphere" id="c_green"><point name="center" x="1.6" y="0" z="12"/><float name="radius" value="1.2"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.9, 0.1"/></bsdf></shape>
-  <emitter type="point"><point name="position" x="0" y="0" z="9"/><rgb name="intensity" value="100"/></emitter>"""
+  </shape>""" + two_spheres(1.6, 12, 1.2, 9, 100)
 
 
 def test_a_mirror_reflecting_two_spheres_yields_two_regions(variant):
@@ -48,12 +56,7 @@ CUTOUT_SCENE = """
         <rgb name="color0" value="0"/><rgb name="color1" value="1"/>
         <transform name="to_uv"><scale x="4" y="4"/></transform></texture>
       <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.2, 0.9"/></bsdf></bsdf>
-  </shape>
-  <shape type="sphere" id="b_red"><point name="center" x="-1.2" y="0" z="0"/><float name="radius" value="1"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.9, 0.1, 0.1"/></bsdf></shape>
-  <shape type="sphere" id="c_green"><point name="center" x="1.2" y="0" z="0"/><float name="radius" value="1"/>
-    <bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.9, 0.1"/></bsdf></shape>
-  <emitter type="point"><point name="position" x="0" y="0" z="1.2"/><rgb name="intensity" value="10"/></emitter>"""
+  </shape>""" + two_spheres(1.2, 0, 1, 1.2, 10)
 
 
 def test_a_cutouts_holes_take_the_ids_of_what_they_show(variant):
