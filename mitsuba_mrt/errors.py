@@ -20,9 +20,20 @@ def one_line(exc: BaseException) -> str:
     >>> one_line(RuntimeError("boom\\nmore detail"))
     'RuntimeError: boom'
     """
-    lines = str(exc).strip().splitlines()
-    first = lines[0] if lines else ""
+    first = first_line(exc)
     return first if isinstance(exc, MRTError) else f"{type(exc).__name__}: {first}"
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of ``exc``'s message ("" for none).
+
+    Examples
+    --------
+    >>> first_line(RuntimeError("  boom\\nmore detail"))
+    'boom'
+    """
+    lines = str(exc).strip().splitlines()
+    return lines[0] if lines else ""
 
 
 class MRTWarning(UserWarning):

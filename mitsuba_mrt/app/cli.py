@@ -13,7 +13,7 @@ import os
 import sys
 import warnings
 
-from ..errors import MRTError, MRTWarning, one_line
+from ..errors import MRTError, MRTWarning, first_line, one_line
 from ..renderer.variants import VARIANT_CHOICES
 from ..types import DENOISE_QUALITIES, DENOISERS
 
@@ -338,8 +338,7 @@ def main(argv=None) -> int:
     except Exception as exc:  # noqa: BLE001 - never a traceback on the terminal
         cause = innermost(exc)
         if unsupported_by_mitsuba(cause):  # bad input: a scene Mitsuba cannot render
-            print(f"error: Mitsuba cannot render this scene: {str(cause).strip().splitlines()[0]}",
-                  file=sys.stderr)
+            print(f"error: Mitsuba cannot render this scene: {first_line(cause)}", file=sys.stderr)
             return 2
         print(f"error: {one_line(cause)}", file=sys.stderr)
         return 2 if isinstance(cause, MRTError) else 1

@@ -93,14 +93,16 @@ def _camera_ray(sensor, sampler, position, spp, centre: bool = False):
 
 
 def nested_sample(integrator, scene, sampler, ray, active, medium=None):
-    """``(value, valid, aovs)`` of one sample of the nested ``integrator`` along ``ray``.
+    """``(value, valid, aovs)`` of one sample of the nested ``integrator`` along ``ray``,
+    which starts in ``medium`` (the camera's, as ``mi.render`` passes it).
 
     Mitsuba's C++ integrators (``path``, ``volpath``, ...) and the MRT's own
     take ``sample(scene, sampler, ray, medium, active)``; its differentiable
     Python integrators (``prb``, ``prbvolpath``, ``direct_projective``, ...,
     subclasses of ``mi.CppADIntegrator``) take an AD mode and their
     derivatives' state, and give their primal estimate for
-    ``dr.ADMode.Primal``, as their own ``render`` asks for it.
+    ``dr.ADMode.Primal``, as their own ``render`` asks for it (no medium:
+    their paths start outside any, in their own renders too).
     """
     if isinstance(integrator, mi.CppADIntegrator):
         value, valid, aovs, _ = integrator.sample(
